@@ -1,0 +1,63 @@
+"""Pure, batched geometry on torch tensors or numpy arrays (SE(2), SE(3), rotations, rigid fits)."""
+
+from lerobot_ocr.geometry.poses import (
+    POSE_SIZES,
+    matrix_to_pose,
+    pose_dim,
+    pose_size,
+    pose_to_matrix,
+    se2_compose,
+    se2_inverse,
+    se2_transform_points,
+)
+from lerobot_ocr.geometry.rigid import (
+    compose,
+    fit_rigid_transform,
+    invert,
+    make_transform,
+    relative,
+    rotation_part,
+    transform_points,
+    transform_vectors,
+    translation_part,
+)
+from lerobot_ocr.geometry.rotations import (
+    angle_to_matrix,
+    axis_angle_to_matrix,
+    matrix_to_angle,
+    matrix_to_axis_angle,
+    matrix_to_quaternion,
+    matrix_to_rotation_6d,
+    quaternion_to_matrix,
+    rotation_6d_to_matrix,
+    wrap_angle,
+)
+
+__all__ = [
+    "POSE_SIZES",
+    "angle_to_matrix",
+    "axis_angle_to_matrix",
+    "compose",
+    "fit_rigid_transform",
+    "invert",
+    "make_transform",
+    "matrix_to_angle",
+    "matrix_to_axis_angle",
+    "matrix_to_pose",
+    "matrix_to_quaternion",
+    "matrix_to_rotation_6d",
+    "pose_dim",
+    "pose_size",
+    "pose_to_matrix",
+    "quaternion_to_matrix",
+    "relative",
+    "rotation_6d_to_matrix",
+    "rotation_part",
+    "se2_compose",
+    "se2_inverse",
+    "se2_transform_points",
+    "transform_points",
+    "transform_vectors",
+    "translation_part",
+    "wrap_angle",
+]

@@ -1,0 +1,87 @@
+"""Pose vectors <-> homogeneous transforms, and SE(2) helpers on (x, y, theta) vectors.
+
+Pose vectors are what datasets and actions store; transforms (see `rigid`) are what the math uses.
+Representations (`rotation=`):
+- "angle": SE(2) pose (x, y, theta), shape (..., 3)
+- "quat_wxyz" / "quat_xyzw": SE(3) position + unit quaternion, shape (..., 7)
+- "axis_angle": SE(3) position + axis-angle, shape (..., 6)
+- "rot6d": SE(3) position + 6D rotation (first two matrix rows), shape (..., 9)
+"""
+
+from __future__ import annotations
+
+import torch
+
+from lerobot_ocr.geometry import rigid, rotations
+from lerobot_ocr.geometry._backend import numpy_compatible
+from lerobot_ocr.validation import check_finite, check_trailing_shape
+
+POSE_SIZES: dict[str, int] = {"angle": 3, "quat_wxyz": 7, "quat_xyzw": 7, "axis_angle": 6, "rot6d": 9}
+
+
+def pose_size(rotation: str) -> int:
+    """Length of a pose vector in the given representation."""
+    if rotation not in POSE_SIZES:
+        raise ValueError(f"Unknown pose representation {rotation!r}; use one of {sorted(POSE_SIZES)}.")
+    return POSE_SIZES[rotation]
+
+
+def pose_dim(rotation: str) -> int:
+    """Spatial dimension d (2 or 3) of a pose representation."""
+    return 2 if pose_size(rotation) == 3 else 3
+
+
+@numpy_compatible
+def pose_to_matrix(pose: torch.Tensor, rotation: str) -> torch.Tensor:
+    """(..., P) pose vector -> (..., d+1, d+1) homogeneous transform. Rejects NaN/inf poses."""
+    size = pose_size(rotation)
+    check_trailing_shape(pose, (size,), "pose", f"A {rotation!r} pose has {size} numbers.")
+    check_finite(pose, "pose", "The object pose is missing or invalid for some frames; fix or drop them.")
+    if rotation == "angle":
+        return rigid.make_transform(rotations.angle_to_matrix(pose[..., 2]), pose[..., :2])
+    pos, rot = pose[..., :3], pose[..., 3:]
+    if rotation in ("quat_wxyz", "quat_xyzw"):
+        mat = rotations.quaternion_to_matrix(rot, convention=rotation[-4:])
+    elif rotation == "axis_angle":
+        mat = rotations.axis_angle_to_matrix(rot)
+    else:
+        mat = rotations.rotation_6d_to_matrix(rot)
+    return rigid.make_transform(mat, pos)
+
+
+@numpy_compatible
+def matrix_to_pose(transform: torch.Tensor, rotation: str) -> torch.Tensor:
+    """(..., d+1, d+1) homogeneous transform -> (..., P) pose vector."""
+    size = pose_size(rotation)
+    d = 2 if size == 3 else 3
+    check_trailing_shape(transform, (d + 1, d + 1), "transform", f"{rotation!r} poses are {d}D.")
+    rot = transform[..., :d, :d]
+    pos = transform[..., :d, d]
+    if rotation == "angle":
+        return torch.cat((pos, rotations.matrix_to_angle(rot)[..., None]), dim=-1)
+    if rotation in ("quat_wxyz", "quat_xyzw"):
+        r = rotations.matrix_to_quaternion(rot, convention=rotation[-4:])
+    elif rotation == "axis_angle":
+        r = rotations.matrix_to_axis_angle(rot)
+    else:
+        r = rotations.matrix_to_rotation_6d(rot)
+    return torch.cat((pos, r), dim=-1)
+
+
+@numpy_compatible
+def se2_compose(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """(..., 3) ∘ (..., 3) SE(2) poses (x, y, theta) -> (..., 3), theta wrapped to [-pi, pi)."""
+    out = matrix_to_pose(rigid.compose(pose_to_matrix(a, "angle"), pose_to_matrix(b, "angle")), "angle")
+    return torch.cat((out[..., :2], rotations.wrap_angle(a[..., 2:] + b[..., 2:])), dim=-1)
+
+
+@numpy_compatible
+def se2_inverse(pose: torch.Tensor) -> torch.Tensor:
+    """(..., 3) SE(2) pose -> its inverse, (..., 3)."""
+    return matrix_to_pose(rigid.invert(pose_to_matrix(pose, "angle")), "angle")
+
+
+@numpy_compatible
+def se2_transform_points(pose: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
+    """Map (..., N, 2) local points to the parent frame by (..., 3) SE(2) poses."""
+    return rigid.transform_points(pose_to_matrix(pose, "angle"), points)

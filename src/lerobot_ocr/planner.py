@@ -1,0 +1,98 @@
+"""Recovery keypoint planner (OCR): a keypoint trajectory that moves the object along the recovery vector.
+
+Shapes: keypoints (B, K, D) world frame; trajectories (B, L, K, D) whose frame 0 is the current
+keypoints (the same convention as the inverse policy's training windows).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from lerobot_ocr.validation import check_finite, check_trailing_shape
+
+
+def recovery_delay(distance: torch.Tensor | float, d_min: float, d_max: float, horizon: int) -> torch.Tensor:
+    """Distance-based delay df(d): steps the keypoints stay still while the robot reaches the object.
+
+    df = 0 for d <= d_min (the end effector is at the object: push right away), df = horizon for
+    d >= d_max (too far: hold still, approach only), linear in between, rounded down. This is the
+    authors' real-robot formula `16 - clip(int(16 - 16 (d - d_min)/(d_max - d_min)), 0, 16)`.
+    (OCR_METHOD.md states the ramp the other way round; holding still when the robot is far is the
+    behaviour the method needs and what the code does.)
+
+    Args:
+        distance: (...,) end-effector-to-object distance, in the keypoints' units.
+    Returns:
+        (...,) integer tensor in [0, horizon].
+    """
+    if not d_max > d_min:
+        raise ValueError(f"Need d_max > d_min, got d_min={d_min}, d_max={d_max}.")
+    if horizon < 1:
+        raise ValueError(f"horizon must be >= 1, got {horizon}.")
+    d = torch.as_tensor(distance, dtype=torch.float64)
+    check_finite(d, "distance", "The end-effector or object position is missing.")
+    frac = (d - d_min) / (d_max - d_min)
+    # Same rounding as the reference: L - clip(floor(L - L*frac), 0, L)
+    return horizon - torch.clamp(torch.floor(horizon - horizon * frac), 0, horizon).long()
+
+
+def plan_keypoint_trajectory(
+    keypoints: torch.Tensor,
+    recovery_vector: torch.Tensor,
+    step_size: float,
+    horizon: int,
+    delay: torch.Tensor | int = 0,
+) -> torch.Tensor:
+    """Keypoint trajectory zeta_t = rho + max(0, t - df) * alpha * delta, t = 0..L-1.
+
+    Args:
+        keypoints: (B, K, D) current world keypoints rho.
+        recovery_vector: (B, D) one shared displacement per step (the paper's mean vector), or
+            (B, K, D) one per keypoint.
+        step_size: alpha, multiplies the recovery vector at every moving step.
+        horizon: L, number of frames.
+        delay: (B,) or scalar df, frames during which the keypoints stay still.
+    Returns:
+        (B, L, K, D) trajectory; frame 0 equals `keypoints`.
+    """
+    check_trailing_shape(keypoints, (None, None), "keypoints")
+    if keypoints.ndim != 3:
+        raise ValueError(f"keypoints must be (B, K, D), got shape {tuple(keypoints.shape)}.")
+    b, k, d = keypoints.shape
+    vec = recovery_vector if recovery_vector.ndim == 3 else recovery_vector.unsqueeze(1)
+    if vec.shape not in ((b, 1, d), (b, k, d)):
+        raise ValueError(
+            f"recovery_vector has shape {tuple(recovery_vector.shape)}, expected ({b}, {d}) or ({b}, {k}, {d})."
+        )
+    check_finite(keypoints, "keypoints")
+    check_finite(vec, "recovery_vector")
+    t = torch.arange(horizon, device=keypoints.device, dtype=keypoints.dtype)
+    delay_t = torch.as_tensor(delay, device=keypoints.device, dtype=keypoints.dtype).reshape(-1, 1)
+    n_moves = torch.clamp(t.unsqueeze(0) - delay_t, min=0.0)  # (B or 1, L)
+    return keypoints.unsqueeze(1) + (n_moves[..., None, None] * step_size) * vec.to(keypoints.dtype).unsqueeze(1)
+
+
+@dataclass
+class RecoveryPlanner:
+    """The paper's planner with its parameters (alpha, L, d_min, d_max) bundled.
+
+    normalize: scale the recovery vector to unit length first, so `step_size` is the distance the
+    keypoints move per frame (the reference code does this for Push-T). Zero vectors stay zero.
+    """
+
+    horizon: int = 16
+    step_size: float = 5.0
+    d_min: float = 0.0
+    d_max: float = 1.0
+    normalize: bool = True
+
+    def __call__(self, keypoints: torch.Tensor, recovery_vector: torch.Tensor, distance: torch.Tensor) -> torch.Tensor:
+        """(B, K, D) keypoints, (B, D) or (B, K, D) recovery vectors, (B,) distances -> (B, L, K, D)."""
+        vec = recovery_vector
+        if self.normalize:
+            norm = torch.linalg.vector_norm(vec, dim=-1, keepdim=True)
+            vec = vec / norm.clamp_min(torch.finfo(vec.dtype).tiny)
+        delay = recovery_delay(distance, self.d_min, self.d_max, self.horizon)
+        return plan_keypoint_trajectory(keypoints, vec, self.step_size, self.horizon, delay)

@@ -33,9 +33,10 @@ def recovery_delay(distance: torch.Tensor | float, d_min: float, d_max: float, h
         raise ValueError(f"horizon must be >= 1, got {horizon}.")
     d = torch.as_tensor(distance, dtype=torch.float64)
     check_finite(d, "distance", "The end-effector or object position is missing.")
-    frac = (d - d_min) / (d_max - d_min)
-    # Same rounding as the reference: L - clip(floor(L - L*frac), 0, L)
-    return horizon - torch.clamp(torch.floor(horizon - horizon * frac), 0, horizon).long()
+    # The reference's L - clip(floor(L - L*frac), 0, L) equals clip(ceil(L*frac), 0, L). Rounding to
+    # 1e-3 of a step first keeps float noise (e.g. float32 distances) from adding a step at d_min.
+    steps = torch.round(horizon * (d - d_min) / (d_max - d_min), decimals=3)
+    return torch.clamp(torch.ceil(steps), 0, horizon).long()
 
 
 def plan_keypoint_trajectory(

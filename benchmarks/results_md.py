@@ -1,0 +1,22 @@
+"""Rewrite one `## <title>` section of benchmarks/RESULTS.md, keeping the others."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "RESULTS.md"
+HEADER = "# Benchmark results\n\nEach section is written by the script named in it; re-run the command to refresh it.\n"
+
+
+def update_section(title: str, body: str, path: Path = RESULTS) -> None:
+    text = path.read_text() if path.exists() else HEADER
+    section = f"## {title}\n\n{body.strip()}\n"
+    pattern = re.compile(rf"^## {re.escape(title)}\n.*?(?=^## |\Z)", re.S | re.M)
+    if pattern.search(text):
+        text = pattern.sub(lambda _: section + "\n", text, count=1)
+    else:
+        text = text.rstrip("\n") + "\n\n" + section
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(text.rstrip("\n") + "\n")
+    tmp.replace(path)

@@ -1,0 +1,5 @@
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+os.environ.setdefault("SDL_VIDEODRIVER", "dummy")

@@ -1,0 +1,61 @@
+import pytest
+import torch
+
+from lerobot_ocr.planner import RecoveryPlanner, plan_keypoint_trajectory, recovery_delay
+
+
+def test_delay_regions():
+    d = torch.tensor([0.0, 0.05, 0.055, 0.0575, 0.06, 0.2], dtype=torch.float64)
+    delay = recovery_delay(d, d_min=0.05, d_max=0.06, horizon=16)
+    assert delay.dtype == torch.long
+    assert delay[0] == 0 and delay[1] == 0  # at or inside d_min: push now
+    assert delay[-1] == 16 and delay[-2] == 16  # at or beyond d_max: hold still
+    assert 0 < delay[2] < 16 and delay[2] == 8  # halfway: half the horizon
+    assert delay[2] <= delay[3]  # monotone
+    # matches the authors' formula 16 - clip(int(16 - 16 (d - dmin)/(dmax - dmin)), 0, 16)
+    ref = [16 - min(max(int(16 - 16 * (x - 0.05) / 0.01), 0), 16) for x in d.tolist()]
+    assert delay.tolist() == ref
+
+
+def test_delay_bad_arguments():
+    with pytest.raises(ValueError, match="d_max > d_min"):
+        recovery_delay(1.0, 2.0, 1.0, 16)
+    with pytest.raises(ValueError, match="non-finite"):
+        recovery_delay(torch.tensor([float("nan")]), 0.0, 1.0, 16)
+
+
+def test_trajectory_shape_start_and_delay():
+    kps = torch.randn(3, 9, 2, dtype=torch.float64)
+    vec = torch.tensor([[1.0, 0.0], [0.0, 2.0], [1.0, 1.0]], dtype=torch.float64)
+    traj = plan_keypoint_trajectory(kps, vec, step_size=5.0, horizon=16, delay=torch.tensor([0, 12, 16]))
+    assert traj.shape == (3, 16, 9, 2)
+    torch.testing.assert_close(traj[:, 0], kps)
+    torch.testing.assert_close(traj[0, -1] - kps[0], torch.tensor([75.0, 0.0], dtype=torch.float64).expand(9, 2))
+    # delay 12: only the last 3 of t = 13, 14, 15 move (t - 12 = 1..3 steps)
+    torch.testing.assert_close(traj[1, 12], kps[1])
+    torch.testing.assert_close(traj[1, -1] - kps[1], torch.tensor([0.0, 30.0], dtype=torch.float64).expand(9, 2))
+    torch.testing.assert_close(traj[2], kps[2].expand(16, 9, 2))  # delay = L: no motion
+
+
+def test_per_keypoint_vectors():
+    kps = torch.zeros(1, 2, 2)
+    vec = torch.tensor([[[1.0, 0.0], [0.0, -1.0]]])
+    traj = plan_keypoint_trajectory(kps, vec, step_size=1.0, horizon=4)
+    torch.testing.assert_close(traj[0, 3], torch.tensor([[3.0, 0.0], [0.0, -3.0]]))
+    with pytest.raises(ValueError, match="recovery_vector has shape"):
+        plan_keypoint_trajectory(kps, torch.zeros(1, 3), 1.0, 4)
+
+
+def test_recovery_planner_normalises_and_keeps_zero():
+    planner = RecoveryPlanner(horizon=8, step_size=2.0, d_min=10.0, d_max=50.0)
+    kps = torch.zeros(2, 3, 2)
+    vec = torch.tensor([[10.0, 0.0], [0.0, 0.0]])
+    traj = planner(kps, vec, distance=torch.tensor([0.0, 0.0]))
+    torch.testing.assert_close(traj[0, -1, 0], torch.tensor([14.0, 0.0]))  # unit vector x 2 x 7 steps
+    assert torch.isfinite(traj).all() and (traj[1] == 0).all()
+    far = planner(kps, vec, distance=torch.tensor([100.0, 100.0]))
+    assert (far == 0).all()
+
+
+def test_delay_float32_boundary_is_not_off_by_one():
+    assert recovery_delay(torch.tensor([0.05], dtype=torch.float32), 0.05, 0.06, 16).item() == 0

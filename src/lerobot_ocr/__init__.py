@@ -1,3 +1,9 @@
-"""lerobot-ocr: Object-Centric Recovery for LeRobot policies."""
+"""lerobot-ocr: Object-Centric Recovery for LeRobot policies.
+
+Importing the package registers our LeRobot types (env `pusht_ocr`; more to come). Heavy optional
+dependencies (gym-pusht, robosuite, matplotlib) load only when used.
+"""
 
 __version__ = "0.1.0"
+
+from lerobot_ocr import envs  # noqa: E402,F401  (registers EnvConfig subclasses)

@@ -1,0 +1,1 @@
+"""Scripted experts that make demonstration datasets (import the task module you need)."""

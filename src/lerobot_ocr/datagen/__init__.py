@@ -1,0 +1,1 @@
+"""Demonstration dataset generators (scripted experts -> LeRobotDataset v3)."""

@@ -152,12 +152,11 @@ class PushTExpert:
             targets = self._push_targets(pre, n, cfg.gap + depth, speed)
             self._sync(env, agent_pos=pre)
             best = (np.inf, 0)
-            wins = False
             for i, t in enumerate(targets):
                 self._model_step(t)
                 e = pose_error(np.array([*self.model.block.position, self.model.block.angle]))
                 if e < 8.0 and self.model._get_coverage() > self.model.success_threshold:
-                    best, wins = (0.0, i), True  # the rollout predicts success: take the shortcut
+                    best = (0.0, i)  # the rollout predicts success: take the shortcut
                     break
                 if e < best[0]:
                     best = (e, i)
@@ -172,8 +171,8 @@ class PushTExpert:
         candidates.sort(key=lambda x: -x[0])
         # Re-rank the best few with the real approach path (it may go around the T).
         rescored = []
-        for rate, pre, n, push, gain in candidates[:8]:
-            path = self._path_to(pose, agent, pre, n)
+        for _, pre, _, push, gain in candidates[:8]:
+            path = self._path_to(pose, agent, pre)
             rescored.append((gain / (len(path) + len(push)), path, push))
         rescored.sort(key=lambda x: -x[0])
         near = [c for c in rescored[: cfg.top_k] if c[0] >= 0.8 * rescored[0][0]]
@@ -181,7 +180,7 @@ class PushTExpert:
         end = push[-1]
         return path + push + [end, end]  # hold at the end until the agent catches up
 
-    def _path_to(self, pose: np.ndarray, agent: np.ndarray, pre: np.ndarray, normal: np.ndarray) -> list[np.ndarray]:
+    def _path_to(self, pose: np.ndarray, agent: np.ndarray, pre: np.ndarray) -> list[np.ndarray]:
         """Shortest clear path agent -> pre-contact point over a visibility graph of the T's corners."""
         cfg = self.cfg
         c = cfg.clearance + 3.0

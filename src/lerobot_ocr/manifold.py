@@ -209,11 +209,15 @@ class KeypointManifold(nn.Module):
         self.log_coef_ = torch.log(self.weights_) + log_det - 0.5 * self.dim * math.log(2 * math.pi)
 
     # ------------------------------------------------------------------------------ evaluation
+    def _log_components(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Whitened offsets y = L^T (x - mu) (..., K, M, D) and log weighted component densities (..., K, M)."""
+        diff = x.unsqueeze(-2) - self.means_  # (..., K, M, D)
+        y = (diff.unsqueeze(-2) @ self.precisions_cholesky_).squeeze(-2)
+        return y, self.log_coef_ - 0.5 * y.square().sum(-1)
+
     def _evaluate(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Log density (..., K) and gradient of the log density (..., K, D), closed form."""
-        diff = x.unsqueeze(-2) - self.means_  # (..., K, M, D)
-        y = (diff.unsqueeze(-2) @ self.precisions_cholesky_).squeeze(-2)  # L^T (x - mu)
-        log_comp = self.log_coef_ - 0.5 * y.square().sum(-1)  # (..., K, M)
+        y, log_comp = self._log_components(x)
         log_p = torch.logsumexp(log_comp, dim=-1)
         resp = torch.exp(log_comp - log_p.unsqueeze(-1))
         # grad log p = -sum_m r_m P_m (x - mu_m), with P = L L^T, so P (x - mu) = L y.
@@ -227,10 +231,7 @@ class KeypointManifold(nn.Module):
 
     def log_density(self, keypoints: torch.Tensor | np.ndarray) -> torch.Tensor:
         """(..., K, D) keypoints -> (..., K) per-keypoint log density (float64)."""
-        x = self._prepare(keypoints)
-        diff = x.unsqueeze(-2) - self.means_
-        y = (diff.unsqueeze(-2) @ self.precisions_cholesky_).squeeze(-2)
-        return torch.logsumexp(self.log_coef_ - 0.5 * y.square().sum(-1), dim=-1)
+        return torch.logsumexp(self._log_components(self._prepare(keypoints))[1], dim=-1)
 
     def density(self, keypoints: torch.Tensor | np.ndarray) -> torch.Tensor:
         """(..., K, D) -> (..., K) per-keypoint raw density p_k (may underflow to 0 far away)."""

@@ -154,7 +154,7 @@ class PushTExpert:
             best = (np.inf, 0)
             for i, t in enumerate(targets):
                 self._model_step(t)
-                e = pose_error(np.array([*self.model.block.position, self.model.block.angle]))
+                e = pose_error(self._block_pose(self.model))
                 if e < 8.0 and self.model._get_coverage() > self.model.success_threshold:
                     best = (0.0, i)  # the rollout predicts success: take the shortcut
                     break

@@ -1,10 +1,9 @@
 import numpy as np
 import pytest
 import torch
-from sklearn.exceptions import NotFittedError
 from sklearn.mixture import GaussianMixture
 
-from lerobot_ocr.manifold import KeypointManifold
+from lerobot_ocr.manifold import KeypointManifold, NotFittedError
 
 
 @pytest.fixture(scope="module")

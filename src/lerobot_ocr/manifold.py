@@ -23,10 +23,15 @@ from typing import Literal
 
 import numpy as np
 import torch
-from sklearn.exceptions import NotFittedError
 from torch import nn
 
 from lerobot_ocr.validation import check_finite, check_trailing_shape
+
+
+
+class NotFittedError(ValueError, AttributeError):
+    """The manifold was used before `fit`/`calibrate` (sklearn's bases; sklearn itself loads lazily)."""
+
 
 ScoreType = Literal["mean_log_density", "min_log_density", "mean_density"]
 MagnitudeType = Literal["log_deficit", "paper"]

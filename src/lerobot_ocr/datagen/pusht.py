@@ -18,8 +18,9 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from lerobot_ocr.envs.configs import PUSHT_TASK as TASK
+
 FPS = 10
-TASK = "Push the T-shaped block onto the T-shaped target."
 
 
 def pusht_features(use_videos: bool = True) -> dict:

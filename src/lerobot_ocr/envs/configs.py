@@ -11,6 +11,7 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGE, OBS_STATE
 
 OBS_OBJECT_POSE = "observation.object_pose"
+PUSHT_TASK = "Push the T-shaped block onto the T-shaped target."
 
 
 def _make_pusht_ocr(kwargs: dict):

@@ -14,6 +14,7 @@ from gym_pusht.envs.pusht import PushTEnv
 from gymnasium import spaces
 from gymnasium.wrappers import TimeLimit
 
+from lerobot_ocr.envs.configs import PUSHT_TASK
 from lerobot_ocr.envs.regions import AxisSplit, accepts, load_region_fn
 from lerobot_ocr.keypoints import PUSHT_T_KEYPOINTS, pose_to_keypoints
 
@@ -63,6 +64,10 @@ class PushTOcrEnv(PushTEnv):
         self.observation_space = spaces.Dict(
             {**self.observation_space.spaces, "object_pose": spaces.Box(-np.inf, np.inf, (3,), dtype=np.float64)}
         )
+
+    # lerobot-eval probes both (a missing one kills AsyncVectorEnv workers) and passes the text as `task`.
+    task_description = PUSHT_TASK
+    task = PUSHT_TASK
 
     def object_pose(self) -> np.ndarray:
         """(3,) block (x, y, theta), theta wrapped to [-pi, pi)."""

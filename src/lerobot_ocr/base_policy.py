@@ -1,0 +1,111 @@
+"""Load, freeze and drive a LeRobot base policy inside another policy.
+
+`load_base_policy` follows LeRobot's own loader (`rollout/context.py`): config, weights and the
+policy's own pre/post processors from a local `pretrained_model` folder or a hub id.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+from lerobot.configs import PreTrainedConfig
+from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+from lerobot.policies.pretrained import PreTrainedPolicy
+from lerobot.policies.utils import populate_queues
+from lerobot.utils.constants import ACTION, OBS_IMAGES
+
+PROCESSOR_FILES = ("policy_preprocessor.json", "policy_postprocessor.json")
+
+
+@dataclass
+class BasePolicy:
+    """A frozen base policy with the processors it was trained with."""
+
+    policy: PreTrainedPolicy
+    preprocessor: Any
+    postprocessor: Any
+
+
+def load_base_config(path: str | Path, revision: str | None = None) -> PreTrainedConfig:
+    """The base's config from a local folder or hub id, with a clear error when neither works."""
+    local = Path(path)
+    if local.exists() and not (local / "config.json").is_file():
+        raise FileNotFoundError(
+            f"Base policy path {local} has no config.json. Point --policy.base_path at a LeRobot "
+            "`pretrained_model` folder (e.g. outputs/train/<run>/checkpoints/last/pretrained_model) or a hub id."
+        )
+    try:
+        return PreTrainedConfig.from_pretrained(str(path), revision=revision)
+    except Exception as e:  # hub errors come in many types (offline, 404, auth)
+        raise FileNotFoundError(
+            f"Cannot load the base policy {str(path)!r}: it is not a local folder with config.json, and the "
+            f"hub could not serve it ({type(e).__name__}: {e}). Check --policy.base_path (a local "
+            "`pretrained_model` folder or a hub id) and your network / HF_HUB_OFFLINE setting."
+        ) from e
+
+
+def freeze(policy: PreTrainedPolicy) -> PreTrainedPolicy:
+    policy.eval()
+    for p in policy.parameters():
+        p.requires_grad_(False)
+    return policy
+
+
+def load_base_policy(path: str | Path, device: str | torch.device, revision: str | None = None) -> BasePolicy:
+    """Base policy + its processors from `path` (a `pretrained_model` folder or hub id), frozen, on `device`."""
+    cfg = load_base_config(path, revision)
+    cfg.pretrained_path = str(path)
+    cfg.device = str(device)
+    if hasattr(cfg, "pretrained_backbone_weights"):
+        cfg.pretrained_backbone_weights = None  # the checkpoint holds the trained backbone; no download
+    policy = get_policy_class(cfg.type).from_pretrained(str(path), config=cfg, revision=revision)
+    policy.to(device)
+    local = Path(path)
+    if local.is_dir() and not all((local / f).is_file() for f in PROCESSOR_FILES):
+        raise FileNotFoundError(
+            f"Base policy folder {local} has no {' / '.join(PROCESSOR_FILES)}: it was saved without its "
+            "processors (normalisation statistics). Save it with LeRobot >= 0.4 (lerobot-train does) and retry."
+        )
+    pre, post = make_pre_post_processors(
+        cfg,
+        pretrained_path=str(path),
+        pretrained_revision=revision,
+        preprocessor_overrides={"device_processor": {"device": str(device)}},
+    )
+    return BasePolicy(freeze(policy), pre, post)
+
+
+def observe_only(policy: PreTrainedPolicy, batch: dict[str, torch.Tensor]) -> None:
+    """Feed an observation to a policy's history without predicting (keeps n_obs_steps > 1 right).
+
+    Mirrors what LeRobot's queue-based policies (diffusion) do at the top of `select_action`.
+    Policies without an observation queue (e.g. ACT with n_obs_steps=1) need nothing.
+    """
+    queues = getattr(policy, "_queues", None)
+    if not isinstance(queues, dict):
+        return
+    batch = dict(batch)
+    image_keys = list(getattr(policy.config, "image_features", None) or {})
+    if OBS_IMAGES in queues and image_keys:
+        batch[OBS_IMAGES] = torch.stack([batch[k] for k in image_keys], dim=-4)
+    populate_queues(queues, batch, exclude_keys=[ACTION])
+
+
+def drop_queued_actions(policy: PreTrainedPolicy) -> None:
+    """Forget the actions a policy queued for later steps, so that it replans at its next call.
+
+    LeRobot > 0.6.1 has `PreTrainedPolicy.drop_queued_actions`; 0.6.1 does not, so clear the
+    queues it uses (`_queues[ACTION]` for diffusion/vqbet, `_action_queue` for ACT and others).
+    """
+    if hasattr(policy, "drop_queued_actions"):
+        policy.drop_queued_actions()
+        return
+    queues = getattr(policy, "_queues", None)
+    if isinstance(queues, dict) and ACTION in queues:
+        queues[ACTION].clear()
+    action_queue = getattr(policy, "_action_queue", None)
+    if action_queue is not None and hasattr(action_queue, "clear"):
+        action_queue.clear()

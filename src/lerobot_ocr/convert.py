@@ -1,0 +1,229 @@
+"""`lerobot-ocr convert`: add the object pose and object keypoints to any LeRobotDataset.
+
+Writes a new dataset with, per frame, `observation.object_pose` (world frame, in the chosen
+representation) and `observation.object_keypoints` ((K*D,) world keypoints, flattened), with stats.
+Built on LeRobot's `dataset_tools.add_features` (parquet rewritten, videos copied, not re-encoded)
+and `recompute_stats`.
+
+Pose sources (`pose_from`):
+- "feature:<name>"            an existing pose feature (representation `pose_rotation`);
+- "keypoints:<name>"          a feature of flattened world keypoints in the `source_keypoints`
+                              layout (e.g. the hub's `pusht_keypoints` corners), rigidly fitted;
+- "estimator:<module>:<fn>"   a user callable fn(frame: dict) -> pose vector, called on every decoded
+                              frame (images included), e.g. a pose estimator; or pass the callable.
+
+Safe: the dataset is built in `<output>.tmp/` and renamed when complete; estimator poses are cached
+in `<output>.work/` as they come, so an interrupted conversion resumes.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from lerobot_ocr.dataset_columns import read_columns
+from lerobot_ocr.geometry import matrix_to_pose, pose_size, pose_to_matrix
+from lerobot_ocr.keypoints import keypoints_to_pose, pose_to_keypoints, resolve_keypoints
+from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OBS_OBJECT_KEYPOINTS, OBS_OBJECT_POSE
+
+POSE_NAMES = {
+    "angle": ["x", "y", "theta"],
+    "quat_wxyz": ["x", "y", "z", "qw", "qx", "qy", "qz"],
+    "quat_xyzw": ["x", "y", "z", "qx", "qy", "qz", "qw"],
+    "axis_angle": ["x", "y", "z", "rx", "ry", "rz"],
+    "rot6d": ["x", "y", "z", "r00", "r01", "r02", "r10", "r11", "r12"],
+}
+_CACHE_EVERY = 256
+
+
+def load_callable(spec: str) -> Callable:
+    """"package.module:function" -> the function."""
+    module, _, name = spec.partition(":")
+    if not module or not name:
+        raise ValueError(f"Estimator must be 'package.module:function', got {spec!r}.")
+    try:
+        return getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError) as e:
+        raise ValueError(f"Cannot load estimator {spec!r}: {e}") from e
+
+
+def _feature_info(features: dict, name: str, repo_id: str) -> dict:
+    if name not in features:
+        raise KeyError(
+            f"Dataset {repo_id} has no feature {name!r}. Its features: {sorted(features)}. "
+            "Pick an existing pose/keypoint feature, or use --pose-from estimator:<module>:<function>."
+        )
+    return features[name]
+
+
+def _check_poses(poses: np.ndarray, episode: np.ndarray, frame: np.ndarray, source: str) -> None:
+    bad = ~np.isfinite(poses).all(-1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(
+            f"The pose source {source} gives NaN/inf poses for {int(bad.sum())} of {len(poses)} frames (first: "
+            f"episode {int(episode[i])}, frame {int(frame[i])}). Fix the source, or drop those episodes first "
+            "(lerobot-edit-dataset --operation.type=delete_episodes)."
+        )
+
+
+def _poses_from_estimator(dataset, estimator: Callable, rotation: str, work: Path) -> np.ndarray:
+    """Call `estimator` on every decoded frame; cache results in `work` so a re-run resumes."""
+    n, size = len(dataset), pose_size(rotation)
+    cache, done_path = work / "poses.npy", work / "done.npy"
+    if cache.exists() and done_path.exists() and len(np.load(done_path)) == n:
+        poses, done = np.load(cache), np.load(done_path)
+    else:
+        poses, done = np.full((n, size), np.nan), np.zeros(n, dtype=bool)
+
+    def flush():
+        for arr, path in ((poses, cache), (done, done_path)):
+            tmp = path.with_name(path.stem + ".tmp.npy")
+            np.save(tmp, arr)
+            tmp.replace(path)
+
+    todo = np.flatnonzero(~done)
+    for j, i in enumerate(tqdm(todo, desc="Estimating object poses", unit="frame")):
+        pose = np.asarray(estimator(dataset[int(i)]), dtype=np.float64).reshape(-1)
+        if pose.shape != (size,):
+            raise ValueError(f"The estimator returned shape {pose.shape} for frame {i}; a {rotation!r} pose has {size} numbers.")
+        poses[i], done[i] = pose, True
+        if (j + 1) % _CACHE_EVERY == 0:
+            flush()
+    flush()
+    return poses
+
+
+def compute_object_poses(
+    root: Path,
+    repo_id: str,
+    features: dict,
+    pose_from: str | Callable,
+    rotation: str,
+    source_keypoints: np.ndarray,
+    work: Path,
+    dataset=None,
+) -> np.ndarray:
+    """(N, P) object poses of every frame in the dataset's file order, from the chosen source."""
+    if callable(pose_from) or str(pose_from).startswith("estimator:"):
+        fn = pose_from if callable(pose_from) else load_callable(str(pose_from).split(":", 1)[1])
+        return _poses_from_estimator(dataset, fn, rotation, work)
+    kind, _, name = str(pose_from).partition(":")
+    if kind not in ("feature", "keypoints") or not name:
+        raise ValueError(
+            f"Unknown --pose-from {pose_from!r}: use 'feature:<name>', 'keypoints:<name>' or 'estimator:<module>:<fn>'."
+        )
+    info = _feature_info(features, name, repo_id)
+    values = read_columns(root, [name])[name].astype(np.float64).reshape(-1, int(np.prod(info["shape"])))
+    if kind == "feature":
+        if values.shape[1] != pose_size(rotation):
+            raise ValueError(
+                f"Feature {name!r} has {values.shape[1]} numbers per frame but a {rotation!r} pose has "
+                f"{pose_size(rotation)}. Set --pose-rotation to its representation."
+            )
+        return values
+    k, d = source_keypoints.shape
+    if values.shape[1] != k * d:
+        raise ValueError(
+            f"Keypoint spec mismatch: feature {name!r} has {values.shape[1]} numbers per frame, but the source "
+            f"keypoint spec has {k} points in {d}D ({k * d} numbers). Pass --source-keypoints with its layout."
+        )
+    spread = float(np.linalg.norm(source_keypoints - source_keypoints.mean(0), axis=1).max())
+    transforms = keypoints_to_pose(values.reshape(-1, k, d), source_keypoints, max_rms_error=0.05 * spread)
+    return matrix_to_pose(transforms, rotation)
+
+
+def convert_dataset(
+    repo_id: str,
+    output_root: str | Path,
+    object_keypoints: str | np.ndarray,
+    pose_from: str | Callable,
+    root: str | Path | None = None,
+    output_repo_id: str | None = None,
+    pose_rotation: str | None = None,
+    source_keypoints: str | np.ndarray | None = None,
+    push_to_hub: bool = False,
+    private: bool = False,
+    overwrite: bool = False,
+):
+    """Write a copy of the dataset with `observation.object_pose` and `observation.object_keypoints`.
+
+    Args:
+        repo_id / root: the source LeRobotDataset (root = its local folder; else the HF cache/hub).
+        output_root / output_repo_id: where the converted dataset goes (repo id default: <repo_id>_ocr).
+        object_keypoints: keypoint spec of the object (see `lerobot_ocr.keypoints.resolve_keypoints`).
+        pose_from: pose source (module doc).
+        pose_rotation: pose representation; default "angle" for 2D keypoints, "quat_wxyz" for 3D.
+        source_keypoints: layout of a "keypoints:" source feature (default: `object_keypoints`).
+    Returns:
+        The converted LeRobotDataset.
+    """
+    from lerobot.datasets import LeRobotDataset
+    from lerobot.datasets.dataset_tools import add_features, recompute_stats
+
+    local = resolve_keypoints(object_keypoints)
+    k, d = local.shape
+    rotation = pose_rotation or ("angle" if d == 2 else "quat_wxyz")
+    if (rotation == "angle") != (d == 2):
+        raise ValueError(f"Keypoint spec mismatch: {d}D keypoints with a {rotation!r} pose.")
+    src_kps = resolve_keypoints(source_keypoints) if source_keypoints is not None else local
+    output_root = Path(output_root)
+    if output_root.exists():
+        if not overwrite:
+            raise FileExistsError(f"{output_root} already exists; pass --overwrite or choose another --output-root.")
+    staging = output_root.with_name(output_root.name + ".tmp")
+    work = output_root.with_name(output_root.name + ".work")
+    work.mkdir(parents=True, exist_ok=True)
+
+    dataset = LeRobotDataset(repo_id, root=root)
+    features = dataset.meta.features
+    hints = read_columns(dataset.root, [])
+    poses = compute_object_poses(dataset.root, repo_id, features, pose_from, rotation, src_kps, work, dataset)
+    _check_poses(poses, hints["episode_index"], hints["frame_index"], str(pose_from))
+    keypoints = pose_to_keypoints(pose_to_matrix(poses, rotation), local)  # (N, K, D) world
+
+    dims = "xyz"[:d]
+    new = {
+        OBS_OBJECT_KEYPOINTS: (
+            keypoints.reshape(len(poses), k * d).astype(np.float32),
+            {"dtype": "float32", "shape": (k * d,), "names": [f"kp{i}_{c}" for i in range(k) for c in dims]},
+        )
+    }
+    if OBS_OBJECT_POSE in features:
+        existing = read_columns(dataset.root, [OBS_OBJECT_POSE])[OBS_OBJECT_POSE].reshape(len(poses), -1)
+        if existing.shape[1] != poses.shape[1] or not np.allclose(existing, poses, atol=1e-3):
+            raise ValueError(
+                f"Dataset {repo_id} already has {OBS_OBJECT_POSE!r} and it differs from the poses of {pose_from!r}. "
+                f"Use --pose-from feature:{OBS_OBJECT_POSE} to keep it."
+            )
+    else:
+        new[OBS_OBJECT_POSE] = (
+            poses.astype(np.float32),
+            {"dtype": "float32", "shape": (poses.shape[1],), "names": POSE_NAMES[rotation]},
+        )
+    if OBS_OBJECT_KEYPOINTS in features:
+        raise ValueError(f"Dataset {repo_id} already has {OBS_OBJECT_KEYPOINTS!r}: it looks converted already.")
+
+    if staging.exists():
+        shutil.rmtree(staging)
+    out_id = output_repo_id or f"{repo_id}_ocr"
+    converted = add_features(dataset, new, output_dir=staging, repo_id=out_id)
+    recompute_stats(converted)
+    (staging / "meta" / "ocr_object.json").write_text(
+        json.dumps({"object_keypoints": local.tolist(), "pose_rotation": rotation, "pose_from": str(pose_from)}, indent=2)
+    )
+    if output_root.exists():
+        shutil.rmtree(output_root)
+    staging.replace(output_root)
+    shutil.rmtree(work, ignore_errors=True)
+    converted = LeRobotDataset(out_id, root=output_root)
+    if push_to_hub:
+        converted.push_to_hub(private=private)
+    return converted
+

@@ -1,0 +1,188 @@
+"""Configuration of the `ocr_joint` policy (`--policy.type=ocr_joint`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from lerobot.configs import NormalizationMode, PreTrainedConfig
+from lerobot.optim import AdamConfig, DiffuserSchedulerConfig
+from lerobot.utils.constants import ACTION, OBS_STATE
+
+from lerobot_ocr.geometry import pose_dim, pose_size
+from lerobot_ocr.manifold import MAGNITUDE_TYPES, SCORE_TYPES
+from lerobot_ocr.object_frame import FrameSpec
+
+OBS_OBJECT_POSE = "observation.object_pose"
+OBS_OBJECT_KEYPOINTS = "observation.object_keypoints"
+
+
+@PreTrainedConfig.register_subclass("ocr_joint")
+@dataclass
+class OcrJointConfig(PreTrainedConfig):
+    """A frozen base policy + OCR recovery (keypoint manifold, planner, keypoint inverse diffusion policy).
+
+    Train: `lerobot-train --policy.type=ocr_joint --policy.base_path=<base checkpoint or hub id>
+    --dataset.root=<dataset converted by `lerobot-ocr convert`>`. Training fits the keypoint
+    manifold on every frame's object keypoints and trains the inverse policy; the base stays frozen.
+
+    Base policy
+        base_path: local `pretrained_model` folder or hub id of any LeRobot policy (with its
+            processors). Required to train; a saved `ocr_joint` checkpoint bundles its own copy.
+        base_revision: hub revision of `base_path`.
+    Object and robot (what the dataset/env features mean)
+        object_pose_key: observation feature with the object pose (world frame).
+        pose_rotation: its representation: "angle" (x, y, theta) for SE(2), or "quat_wxyz",
+            "quat_xyzw", "axis_angle", "rot6d" for SE(3).
+        object_keypoints: object-frame keypoint spec ("pusht_t", "axes:0.05", a .npy/.json file).
+        state_key / state_frame, action_frame: how proprioception and actions move with the
+            object frame ("point", "pose:<rotation>", "none"; see `lerobot_ocr.object_frame`).
+        ee_position_start: the end-effector position is state[start:start+d], used for the
+            planner's distance-based delay; None = no delay.
+    Switch
+        threshold: OOD score threshold (score < threshold -> recover); None = calibrate as the
+            `calibration_quantile` of the training frames' scores.
+        score_type: "mean_log_density" | "min_log_density" | "mean_density" (paper).
+        hysteresis: return to the base only once score >= threshold + hysteresis.
+        latch: never recover again once the base has taken over (the reference Push-T eval).
+    Recovery
+        magnitude: recovery vector magnitude, "log_deficit" (ours) or "paper" (q(|grad p|)).
+        step_size (alpha, object units per frame), horizon (L), d_min / d_max (delay ramp),
+        n_recovery_action_steps: actions executed per recovery chunk before re-deciding.
+    Inverse policy: LeRobot's diffusion U-Net (`down_dims`, ...), DDIM with
+        `num_inference_steps` steps by default.
+    """
+
+    # Base policy.
+    base_path: str | None = None
+    base_revision: str | None = None
+
+    # Object and robot.
+    object_pose_key: str = OBS_OBJECT_POSE
+    pose_rotation: str = "angle"
+    object_keypoints: str = "pusht_t"
+    state_key: str = OBS_STATE
+    state_frame: str = "point"
+    action_frame: str = "point"
+    ee_position_start: int | None = 0
+
+    # Manifold and switch.
+    n_components: int = 4
+    covariance_type: str = "full"
+    score_type: str = "mean_log_density"
+    threshold: float | None = None
+    calibration_quantile: float = 0.02
+    hysteresis: float = 0.0
+    latch: bool = False
+
+    # Recovery vector and planner.
+    magnitude: str = "log_deficit"
+    step_size: float = 5.0
+    horizon: int = 16
+    d_min: float = 15.0
+    d_max: float = 60.0
+    n_recovery_action_steps: int = 8
+
+    # Keypoint inverse policy (LeRobot's diffusion U-Net).
+    down_dims: tuple[int, ...] = (256, 512, 1024)
+    kernel_size: int = 5
+    n_groups: int = 8
+    diffusion_step_embed_dim: int = 128
+    use_film_scale_modulation: bool = True
+    noise_scheduler_type: str = "DDIM"
+    num_train_timesteps: int = 100
+    num_inference_steps: int | None = 10
+    beta_schedule: str = "squaredcos_cap_v2"
+    prediction_type: str = "epsilon"
+    clip_sample: bool = True
+    max_normalization_windows: int = 20_000
+
+    # Training presets (as LeRobot's diffusion policy).
+    optimizer_lr: float = 1e-4
+    optimizer_betas: tuple[float, float] = (0.95, 0.999)
+    optimizer_eps: float = 1e-8
+    optimizer_weight_decay: float = 1e-6
+    scheduler_name: str = "cosine"
+    scheduler_warmup_steps: int = 500
+
+    # The wrapper does not normalise: the base runs its own processors, the inverse policy holds
+    # its own object-frame statistics. The steps exist so that LeRobot's overrides find them.
+    normalization_mapping: dict[str, NormalizationMode] = field(
+        default_factory=lambda: {
+            "VISUAL": NormalizationMode.IDENTITY,
+            "STATE": NormalizationMode.IDENTITY,
+            "ENV": NormalizationMode.IDENTITY,
+            "ACTION": NormalizationMode.IDENTITY,
+        }
+    )
+
+    def __post_init__(self):
+        super().__post_init__()
+        self.down_dims = tuple(self.down_dims)
+        pose_dim(self.pose_rotation)  # validates the representation
+        FrameSpec.parse(self.state_frame)
+        FrameSpec.parse(self.action_frame)
+        if self.score_type not in SCORE_TYPES:
+            raise ValueError(f"--policy.score_type must be one of {SCORE_TYPES}, got {self.score_type!r}.")
+        if self.magnitude not in MAGNITUDE_TYPES:
+            raise ValueError(f"--policy.magnitude must be one of {MAGNITUDE_TYPES}, got {self.magnitude!r}.")
+        if self.horizon % 2 ** len(self.down_dims):
+            raise ValueError(
+                f"--policy.horizon ({self.horizon}) must be a multiple of 2**len(down_dims) = {2 ** len(self.down_dims)}."
+            )
+        if not 1 <= self.n_recovery_action_steps <= self.horizon:
+            raise ValueError(f"--policy.n_recovery_action_steps must be in [1, horizon={self.horizon}].")
+        if not self.d_max > self.d_min:
+            raise ValueError(f"Need d_max > d_min, got d_min={self.d_min}, d_max={self.d_max}.")
+        if self.hysteresis < 0:
+            raise ValueError(f"--policy.hysteresis must be >= 0, got {self.hysteresis}.")
+
+    @property
+    def object_dim(self) -> int:
+        """2 for SE(2) objects, 3 for SE(3)."""
+        return pose_dim(self.pose_rotation)
+
+    def validate_features(self) -> None:
+        """Check that the features say what the config expects (pose feature, state, action)."""
+        if self.object_pose_key not in self.input_features:
+            raise ValueError(
+                f"The dataset has no object pose feature {self.object_pose_key!r} (it has "
+                f"{sorted(self.input_features)}). Convert it first: `lerobot-ocr convert --repo-id ... "
+                "--object <keypoint spec> --pose-from <source> --output-root ...`, or set --policy.object_pose_key."
+            )
+        if self.state_key not in self.input_features:
+            raise ValueError(
+                f"The keypoint inverse policy needs the robot state {self.state_key!r}; set --policy.state_key."
+            )
+        if ACTION not in self.output_features:
+            raise ValueError("The dataset has no `action` feature.")
+        size = self.input_features[self.object_pose_key].shape[-1]
+        if size != pose_size(self.pose_rotation):
+            raise ValueError(
+                f"{self.object_pose_key} has {size} numbers but pose_rotation={self.pose_rotation!r} needs "
+                f"{pose_size(self.pose_rotation)}. Set --policy.pose_rotation to the feature's representation."
+            )
+
+    def get_optimizer_preset(self) -> AdamConfig:
+        return AdamConfig(
+            lr=self.optimizer_lr,
+            betas=self.optimizer_betas,
+            eps=self.optimizer_eps,
+            weight_decay=self.optimizer_weight_decay,
+        )
+
+    def get_scheduler_preset(self) -> DiffuserSchedulerConfig:
+        return DiffuserSchedulerConfig(name=self.scheduler_name, num_warmup_steps=self.scheduler_warmup_steps)
+
+    # Training windows are gathered by the policy from the dataset's low-dim columns (see
+    # `OcrJointPolicy.forward`), so the dataset yields single frames: no video frame is decoded L times.
+    @property
+    def observation_delta_indices(self) -> None:
+        return None
+
+    @property
+    def action_delta_indices(self) -> None:
+        return None
+
+    @property
+    def reward_delta_indices(self) -> None:
+        return None

@@ -27,6 +27,22 @@ def _generate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _convert(args: argparse.Namespace) -> int:
+    from lerobot_ocr.convert import convert_dataset
+
+    ds = convert_dataset(
+        args.repo_id, args.output_root, args.object, args.pose_from, root=args.root,
+        output_repo_id=args.output_repo_id, pose_rotation=args.pose_rotation,
+        source_keypoints=args.source_keypoints, push_to_hub=args.push_to_hub, private=args.private,
+        overwrite=args.overwrite,
+    )  # fmt: skip
+    print(
+        f"Wrote {ds.meta.total_episodes} episodes / {ds.meta.total_frames} frames with observation.object_pose and "
+        f"observation.object_keypoints to {args.output_root} (repo_id {ds.repo_id})."
+    )
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="lerobot-ocr", description="Object-Centric Recovery for LeRobot policies.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -49,6 +65,27 @@ def build_parser() -> argparse.ArgumentParser:
     gen.add_argument("--private", action="store_true", help="Make the hub repo private.")
     gen.add_argument("--keep-work", action="store_true", help="Keep the per-episode cache <root>.work/.")
     gen.set_defaults(func=_generate)
+
+    conv = sub.add_parser(
+        "convert",
+        help="Add object pose + keypoints (observation.object_pose / observation.object_keypoints) to a LeRobotDataset.",
+    )
+    conv.add_argument("--repo-id", required=True, help="Source dataset repo id.")
+    conv.add_argument("--root", default=None, help="Local folder of the source dataset (else the HF cache / hub).")
+    conv.add_argument("--object", required=True, help="Object keypoint spec: pusht_t, pusht_corners, axes:0.05, or a .npy/.json file.")
+    conv.add_argument(
+        "--pose-from", required=True,
+        help="Pose source: feature:<name> (a pose feature), keypoints:<name> (flattened world keypoints, rigidly "
+        "fitted), or estimator:<module>:<function> (called on every decoded frame).",
+    )  # fmt: skip
+    conv.add_argument("--output-root", required=True, help="Folder of the converted dataset.")
+    conv.add_argument("--output-repo-id", default=None, help="Repo id of the converted dataset (default <repo-id>_ocr).")
+    conv.add_argument("--pose-rotation", default=None, help="Pose representation: angle (2D) | quat_wxyz | quat_xyzw | axis_angle | rot6d.")
+    conv.add_argument("--source-keypoints", default=None, help="Layout of a keypoints:<name> source (default: --object).")
+    conv.add_argument("--push-to-hub", action="store_true", help="Upload the converted dataset under its repo id.")
+    conv.add_argument("--private", action="store_true", help="Make the hub repo private.")
+    conv.add_argument("--overwrite", action="store_true", help="Replace an existing --output-root.")
+    conv.set_defaults(func=_convert)
     return parser
 
 

@@ -1,0 +1,211 @@
+"""The ocr_joint policy on tiny data: switch per row, base history, bad input, save/load, a second base type."""
+
+import numpy as np
+import pytest
+import torch
+from conftest import TINY_OCR, save_base_checkpoint
+
+pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
+
+OOD_POSE = [400.0, 120.0, 0.5]  # every T keypoint at x > 256: right half, never seen in the ID demos
+
+
+def make_joint(base, dataset, **overrides):
+    from lerobot.datasets import LeRobotDatasetMetadata
+    from lerobot.policies.factory import make_policy
+
+    from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
+
+    cfg = OcrJointConfig(base_path=str(base), **{**TINY_OCR, **overrides})
+    return make_policy(cfg, ds_meta=LeRobotDatasetMetadata("local/pusht_ocr_ocr", root=dataset))
+
+
+def observation(poses, states=None):
+    poses = torch.tensor(poses, dtype=torch.float32)
+    b = len(poses)
+    states = torch.tensor(states, dtype=torch.float32) if states is not None else torch.full((b, 2), 200.0)
+    return {
+        "observation.image": torch.rand(b, 3, 96, 96, generator=torch.Generator().manual_seed(0)),
+        "observation.state": states,
+        "observation.object_pose": poses,
+        "task": ["push"] * b,
+    }
+
+
+@pytest.fixture(scope="module")
+def joint(diffusion_base, converted_dataset):
+    return make_joint(diffusion_base, converted_dataset)
+
+
+@pytest.fixture(scope="module")
+def id_pose(joint):
+    """The most in-distribution pose of the training data."""
+    scores = joint.manifold.score(joint._tbl_keypoints.double())
+    from lerobot_ocr.geometry import matrix_to_pose
+
+    return matrix_to_pose(joint._tbl_frames[int(scores.argmax())], "angle").tolist()
+
+
+def test_fit_on_dataset(joint, id_pose):
+    assert joint.manifold.is_fitted and joint.manifold.is_calibrated
+    assert joint.inverse.fitted_.item()
+    scores = joint.manifold.score(joint._tbl_keypoints.double())
+    assert (scores < joint.manifold.threshold_).float().mean().item() == pytest.approx(0.02, abs=0.01)
+    ood_keypoints = joint._keypoints(joint._pose_matrix(torch.tensor([OOD_POSE])))
+    assert joint.manifold.score(ood_keypoints.double()) < joint.manifold.threshold_
+    assert not any(p.requires_grad for p in joint.base.parameters())
+    assert {id(p) for p in joint.get_optim_params()} == {id(p) for p in joint.inverse.parameters()}
+
+
+def test_training_loss_uses_object_frame_windows(joint):
+    loss, _ = joint.forward({"index": torch.tensor([0, 5, 100, 295])})
+    assert torch.isfinite(loss) and loss.requires_grad
+    w = joint._windows(torch.tensor([0, 295]))
+    kp, _, _ = joint.inverse.to_object_frame(w["keypoints"], w["state"], w["frame"], w["actions"])
+    local = joint.object_keypoints_.expand(2, -1, -1)
+    torch.testing.assert_close(kp[:, 0], local, atol=1e-3, rtol=0)  # zero-out: first frame at the identity
+    assert w["action_is_pad"][1, 1:].all() and not w["action_is_pad"][0].any()  # last frame of the dataset
+    with pytest.raises(KeyError, match="unknown `index`"):
+        joint.forward({"index": torch.tensor([10_000])})
+
+
+def test_switch_is_decided_per_row(joint, id_pose, monkeypatch):
+    joint.reset()
+    marker = torch.full((1, TINY_OCR["horizon"], 2), 123.0)
+    monkeypatch.setattr(joint.inverse, "sample", lambda plan, state, frames, noise=None: marker.expand(len(plan), -1, -1))
+    batch = observation([id_pose, OOD_POSE, id_pose])
+    torch.manual_seed(0)
+    action = joint.select_action(dict(batch))
+    stats = joint.ocr_stats()
+    assert stats["in_recovery"][-1].tolist() == [False, True, False]
+    assert action[1].tolist() == [123.0, 123.0]
+    joint.base.reset()  # the base alone, same seed, same observation
+    torch.manual_seed(0)
+    expected = joint._base_post(joint.base.select_action(joint._base_pre(dict(batch))))
+    torch.testing.assert_close(action[[0, 2]], expected[[0, 2]])
+    assert stats["recovery_fraction"] == [0.0, 1.0, 0.0] and stats["recovery_chunks"] == 1
+
+
+def test_base_history_stays_right_through_a_recovery(diffusion_base, converted_dataset, id_pose):
+    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=1)
+    joint.reset()
+    normalized = lambda s: joint._base_pre(observation([id_pose], [s]))["observation.state"]  # noqa: E731
+    states = [[100.0 + 10 * t, 300.0] for t in range(5)]
+    joint.select_action(observation([id_pose], [states[0]]))  # base runs, queues a chunk
+    assert len(joint.base._queues["action"]) == joint.base.config.n_action_steps - 1
+    for t in (1, 2, 3):  # the object is pushed out: recovery; the base only observes
+        joint.select_action(observation([OOD_POSE], [states[t]]))
+        assert joint.ocr_stats()["in_recovery"][-1].tolist() == [True]
+        queue = list(joint.base._queues["observation.state"])
+        torch.testing.assert_close(queue[-1], normalized(states[t]))
+        assert len(joint.base._queues["action"]) == 0  # no stale chunk kept
+    joint.select_action(observation([id_pose], [states[4]]))  # back in distribution: hand back
+    assert joint.ocr_stats()["in_recovery"][-1].tolist() == [False] and joint.ocr_stats()["handbacks"] == 1
+    queue = list(joint.base._queues["observation.state"])
+    torch.testing.assert_close(torch.stack(queue), torch.stack([normalized(states[3]), normalized(states[4])]))
+    assert len(joint.base._queues["action"]) == joint.base.config.n_action_steps - 1  # a fresh chunk
+
+
+def test_hysteresis_and_latch(diffusion_base, converted_dataset, id_pose):
+    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=1, hysteresis=1e6)
+    joint.reset()
+    joint.select_action(observation([OOD_POSE]))
+    joint.select_action(observation([id_pose]))  # ID, but not by the hysteresis margin: keeps recovering
+    assert joint.ocr_stats()["in_recovery"][:, 0].tolist() == [True, True]
+
+    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=1, latch=True)
+    joint.reset()
+    for pose in (OOD_POSE, id_pose, OOD_POSE):
+        joint.select_action(observation([pose]))
+    assert joint.ocr_stats()["in_recovery"][:, 0].tolist() == [True, False, False]  # latched on the base
+
+
+def test_bad_input_gives_clear_errors(joint, diffusion_base, converted_dataset, tmp_path):
+    obs = observation([OOD_POSE])
+    del obs["observation.object_pose"]
+    with pytest.raises(KeyError, match="no 'observation.object_pose'.*--env.type=pusht_ocr"):
+        joint.select_action(obs)
+    with pytest.raises(ValueError, match="non-finite"):
+        joint.select_action(observation([[np.nan, 1.0, 0.0]]))
+    with pytest.raises(FileNotFoundError, match="Cannot load the base policy 'nobody/no_such_policy'"):
+        make_joint("nobody/no_such_policy", converted_dataset)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(FileNotFoundError, match="has no config.json"):
+        make_joint(tmp_path / "empty", converted_dataset)
+    with pytest.raises(ValueError, match="Keypoint spec mismatch"):
+        make_joint(diffusion_base, converted_dataset, object_keypoints="axes:0.05")
+    with pytest.raises(ValueError, match="no object pose feature 'observation.block_pose'.*lerobot-ocr convert"):
+        make_joint(diffusion_base, converted_dataset, object_pose_key="observation.block_pose")
+
+
+def test_save_load_round_trip_gives_identical_actions(joint, id_pose, tmp_path, monkeypatch):
+    from lerobot.policies.factory import get_policy_class
+    from safetensors import safe_open
+
+    joint.save_pretrained(tmp_path / "ckpt")
+    with safe_open(str(tmp_path / "ckpt" / "model.safetensors"), "pt") as f:
+        keys = list(f.keys())
+    assert any(k.startswith("manifold.") for k in keys) and not any(k.startswith("base.") for k in keys)
+    for name in ("config.json", "model.safetensors", "policy_preprocessor.json", "policy_postprocessor.json"):
+        assert (tmp_path / "ckpt" / "base" / name).is_file()
+    monkeypatch.setattr(joint.config, "base_path", str(tmp_path / "moved_away"))  # the bundle is self-contained
+    joint.save_pretrained(tmp_path / "ckpt2")
+    loaded = get_policy_class("ocr_joint").from_pretrained(tmp_path / "ckpt2")
+    batch = observation([id_pose, OOD_POSE])
+    actions = []
+    for policy in (joint, loaded):
+        policy.reset()
+        torch.manual_seed(7)
+        actions.append(torch.stack([policy.select_action(dict(batch)) for _ in range(3)]))
+    torch.testing.assert_close(actions[0], actions[1])
+    assert loaded.ocr_stats()["in_recovery"][-1].tolist() == [False, True]
+
+
+def test_push_to_hub_and_load_by_hub_id(joint, tmp_path, monkeypatch):
+    import lerobot.utils.hub as hub
+    from lerobot.policies.factory import get_policy_class
+
+    uploaded = {}
+
+    class FakeApi:
+        def __init__(self, token=None):
+            pass
+
+        def create_repo(self, repo_id, private=None, exist_ok=False):
+            return type("Repo", (), {"repo_id": repo_id})()
+
+        def upload_folder(self, repo_id, folder_path, **kw):
+            import shutil
+
+            shutil.copytree(folder_path, tmp_path / "hub" / repo_id)  # the "hub" is a local folder
+            uploaded[repo_id] = sorted(p.relative_to(folder_path).as_posix() for p in folder_path.rglob("*"))
+            return "https://huggingface.co/fake/commit"
+
+    monkeypatch.setattr(hub, "HfApi", FakeApi)
+    joint.push_to_hub("me/ocr_joint_pusht")
+    assert "base/model.safetensors" in uploaded["me/ocr_joint_pusht"] and "model.safetensors" in uploaded["me/ocr_joint_pusht"]
+    monkeypatch.setattr("huggingface_hub.snapshot_download", lambda repo_id, **kw: str(tmp_path / "hub" / repo_id))
+    loaded = get_policy_class("ocr_joint").from_pretrained("me/ocr_joint_pusht")
+    torch.testing.assert_close(loaded.manifold.means_, joint.manifold.means_)
+
+
+def test_act_base(pusht_dataset, converted_dataset, id_pose):
+    """A second base type: ACT (no observation queue, action queue only)."""
+    from lerobot.datasets import LeRobotDatasetMetadata
+    from lerobot.policies.act.configuration_act import ACTConfig
+
+    cfg = ACTConfig(
+        device="cpu", push_to_hub=False, chunk_size=8, n_action_steps=8, dim_model=32, n_heads=2, dim_feedforward=64,
+        n_encoder_layers=1, n_decoder_layers=1, use_vae=False, pretrained_backbone_weights=None,
+    )  # fmt: skip
+    base = save_base_checkpoint(cfg, LeRobotDatasetMetadata("local/pusht_ocr", root=pusht_dataset), pusht_dataset.with_name("act"))
+    joint = make_joint(base, converted_dataset, n_recovery_action_steps=2)
+    assert joint.base.name == "act"
+    joint.reset()
+    for poses in ([id_pose, OOD_POSE], [id_pose, OOD_POSE], [id_pose, id_pose]):  # one 2-step chunk, then back
+        action = joint.select_action(observation(poses))
+        assert action.shape == (2, 2) and torch.isfinite(action).all()
+    modes = joint.ocr_stats()["in_recovery"]
+    assert modes[:, 0].tolist() == [False] * 3 and modes[:, 1].tolist() == [True, True, False]
+    chunk = joint.predict_action_chunk(observation([id_pose, OOD_POSE]))
+    assert chunk.shape == (2, 2, 2)

@@ -1,0 +1,52 @@
+"""The user's three commands, in-process: lerobot-ocr convert -> lerobot-train -> lerobot-eval."""
+
+import json
+import sys
+
+import pytest
+
+pytestmark = [pytest.mark.slow, pytest.mark.filterwarnings("ignore::UserWarning")]
+
+
+def test_convert_train_eval(pusht_dataset, diffusion_base, tmp_path, monkeypatch):
+    from lerobot.scripts import lerobot_eval, lerobot_train
+
+    from lerobot_ocr.cli import main as ocr_main
+    from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
+
+    conv = tmp_path / "converted"
+    assert ocr_main([
+        "convert", "--repo-id", "local/pusht_ocr", "--root", str(pusht_dataset), "--object", "pusht_t",
+        "--pose-from", "keypoints:observation.environment_state", "--source-keypoints", "pusht_corners",
+        "--output-root", str(conv), "--output-repo-id", "local/pusht_ocr_kp",
+    ]) == 0  # fmt: skip
+
+    monkeypatch.setattr(sys, "argv", [
+        "lerobot-train", "--dataset.repo_id=local/pusht_ocr_kp", f"--dataset.root={conv}",
+        "--policy.type=ocr_joint", f"--policy.base_path={diffusion_base}", "--policy.device=cpu",
+        "--policy.push_to_hub=false", "--policy.down_dims=[32,64]", "--policy.diffusion_step_embed_dim=32",
+        "--policy.num_inference_steps=2", "--policy.n_components=2", "--steps=3", "--batch_size=4",
+        "--num_workers=0", "--env_eval_freq=0", "--save_freq=3", "--log_freq=1", f"--output_dir={tmp_path / 'train'}",
+    ])  # fmt: skip
+    lerobot_train.main()
+    ckpt = tmp_path / "train" / "checkpoints" / "last" / "pretrained_model"
+    assert (ckpt / "base" / "model.safetensors").is_file()
+
+    instances = []
+    real_select = OcrJointPolicy.select_action
+
+    def recording_select(self, batch, **kw):
+        instances.append(self)
+        return real_select(self, batch, **kw)
+
+    monkeypatch.setattr(OcrJointPolicy, "select_action", recording_select)
+    monkeypatch.setattr(sys, "argv", [
+        "lerobot-eval", f"--policy.path={ckpt}", "--env.type=pusht_ocr", "--env.region=ood",
+        "--env.episode_length=12", "--eval.n_episodes=1", "--eval.batch_size=1", "--policy.device=cpu",
+        f"--output_dir={tmp_path / 'eval'}",
+    ])  # fmt: skip
+    lerobot_eval.main()
+    info = json.loads((tmp_path / "eval" / "eval_info.json").read_text())
+    assert info["overall"]["n_episodes"] == 1
+    stats = instances[-1].ocr_stats()
+    assert stats["steps"] == 12 and stats["in_recovery"][0, 0]  # an OOD start triggers the recovery

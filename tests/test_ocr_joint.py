@@ -87,7 +87,7 @@ def test_switch_is_decided_per_row(joint, id_pose, monkeypatch):
 
 
 def test_base_history_stays_right_through_a_recovery(diffusion_base, converted_dataset, id_pose):
-    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=1)
+    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=1, check_every_step=True)
     joint.reset()
     normalized = lambda s: joint._base_pre(observation([id_pose], [s]))["observation.state"]  # noqa: E731
     states = [[100.0 + 10 * t, 300.0] for t in range(5)]
@@ -106,6 +106,17 @@ def test_base_history_stays_right_through_a_recovery(diffusion_base, converted_d
     assert len(joint.base._queues["action"]) == joint.base.config.n_action_steps - 1  # a fresh chunk
 
 
+def test_rows_on_the_base_are_checked_at_the_end_of_its_chunk(joint, id_pose):
+    joint.reset()
+    n = joint.base.config.n_action_steps
+    poses = [id_pose] + [OOD_POSE] * n  # the T leaves the distribution right after the base planned
+    for pose in poses:
+        joint.select_action(observation([pose]))
+    stats = joint.ocr_stats()
+    assert stats["in_recovery"][:, 0].tolist() == [False] * n + [True]
+    assert np.isnan(stats["score"][1:n, 0]).all() and np.isfinite(stats["score"][[0, n], 0]).all()
+
+
 def test_hysteresis_and_latch(diffusion_base, converted_dataset, id_pose):
     joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=1, hysteresis=1e6)
     joint.reset()
@@ -113,7 +124,7 @@ def test_hysteresis_and_latch(diffusion_base, converted_dataset, id_pose):
     joint.select_action(observation([id_pose]))  # ID, but not by the hysteresis margin: keeps recovering
     assert joint.ocr_stats()["in_recovery"][:, 0].tolist() == [True, True]
 
-    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=1, latch=True)
+    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=1, latch=True, check_every_step=True)
     joint.reset()
     for pose in (OOD_POSE, id_pose, OOD_POSE):
         joint.select_action(observation([pose]))

@@ -36,7 +36,37 @@ def test_discover_packages_path_flag_loads_the_package():
 def test_import_is_light():
     out = _run(
         "import sys, lerobot_ocr, lerobot_policy_ocr\n"
-        "heavy = [m for m in ('robosuite', 'mujoco', 'gym_pusht', 'pymunk', 'pygame', 'matplotlib') if m in sys.modules]\n"
+        "heavy = [m for m in ('robosuite', 'mujoco', 'gym_pusht', 'pymunk', 'pygame', 'matplotlib', 'sklearn') if m in sys.modules]\n"
         "print(heavy)\n"
     )
     assert out.strip() == "[]"
+
+
+def test_policy_type_is_registered_with_lerobot_naming():
+    import lerobot_ocr  # noqa: F401
+    from lerobot.policies.factory import get_policy_class
+    from lerobot.policies.factory import _make_processors_from_policy_config as processors_for
+
+    from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
+
+    assert get_policy_class("ocr_joint").name == "ocr_joint"
+    cfg = OcrJointConfig(device="cpu")
+    pre, post = processors_for(cfg)
+    names = [type(step).__name__ for step in pre.steps]
+    assert names[-1] == "NormalizerProcessorStep" and "DeviceProcessorStep" in names  # LeRobot's overrides apply
+
+
+def test_pusht_config_file_parses_with_cli_overrides():
+    from pathlib import Path
+
+    import lerobot_ocr  # noqa: F401
+    from lerobot.configs.train import TrainPipelineConfig
+
+    path = Path(__file__).resolve().parents[1] / "configs" / "policy" / "ocr_joint_pusht.json"
+    cfg = TrainPipelineConfig.from_pretrained(
+        str(path),
+        cli_args=["--dataset.repo_id=you/pusht_ocr", "--policy.base_path=/b", "--policy.device=cpu", "--policy.down_dims=[64,128,256]"],
+    )
+    assert cfg.policy.type == "ocr_joint" and cfg.policy.base_path == "/b"
+    assert cfg.policy.down_dims == (64, 128, 256) and cfg.policy.object_keypoints == "pusht_t"
+    assert cfg.batch_size == 256 and cfg.dataset.repo_id == "you/pusht_ocr"

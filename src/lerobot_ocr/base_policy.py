@@ -94,6 +94,15 @@ def observe_only(policy: PreTrainedPolicy, batch: dict[str, torch.Tensor]) -> No
     populate_queues(queues, batch, exclude_keys=[ACTION])
 
 
+def queued_actions(policy: PreTrainedPolicy) -> int | None:
+    """How many actions the policy will pop before it plans again (None: unknown, e.g. temporal ensembling)."""
+    queues = getattr(policy, "_queues", None)
+    if isinstance(queues, dict) and ACTION in queues:
+        return len(queues[ACTION])
+    action_queue = getattr(policy, "_action_queue", None)
+    return len(action_queue) if action_queue is not None and hasattr(action_queue, "__len__") else None
+
+
 def drop_queued_actions(policy: PreTrainedPolicy) -> None:
     """Forget the actions a policy queued for later steps, so that it replans at its next call.
 

@@ -1,9 +1,11 @@
 """The `ocr_joint` policy: a frozen LeRobot base policy + Object-Centric Recovery.
 
-At every step, per batch row: object pose -> keypoints -> manifold score. A row whose score falls
-below the threshold switches to recovery: the manifold's recovery vector, the planner's keypoint
-trajectory (L frames) and the keypoint inverse policy give L actions, of which
-`n_recovery_action_steps` are executed before the row decides again. Other rows run the base.
+Per batch row: object pose -> keypoints -> manifold score. A row whose score falls below the
+threshold switches to recovery: the manifold's recovery vector, the planner's keypoint trajectory
+(L frames) and the keypoint inverse policy give L actions, of which `n_recovery_action_steps` are
+executed before the row decides again. Other rows run the base. As in the paper, decisions are made
+at chunk boundaries: while every row is inside a base chunk nothing is checked (the step costs what
+the base costs); `check_every_step=True` checks every row at every step.
 
 The base sees every observation, also while a row recovers (its observation history stays right),
 and its queued actions are dropped whenever a row hands back to it, so it never executes a chunk
@@ -29,7 +31,7 @@ from lerobot.utils.constants import ACTION
 from lerobot.utils.device_utils import resolve_safetensors_device
 from safetensors.torch import load_model as load_model_as_safetensor
 
-from lerobot_ocr.base_policy import drop_queued_actions, load_base_policy, observe_only
+from lerobot_ocr.base_policy import drop_queued_actions, load_base_policy, observe_only, queued_actions
 from lerobot_ocr.dataset_columns import episode_last_positions, read_columns, window_positions
 from lerobot_ocr.geometry import pose_to_matrix
 from lerobot_ocr.inverse_policy import KeypointInversePolicy
@@ -37,7 +39,6 @@ from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
 from lerobot_ocr.manifold import KeypointManifold
 from lerobot_ocr.planner import RecoveryPlanner
 from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
-from lerobot_ocr.validation import check_finite
 
 BASE_DIR = "base"
 MODEL_FILE = "model.safetensors"
@@ -51,7 +52,7 @@ class OcrJointPolicy(PreTrainedPolicy):
     (`from_pretrained`, lerobot-eval) it loads them together with the bundled base policy.
 
     After a rollout, `ocr_stats()` says what it did (fraction of steps in recovery per row, the
-    score over time, recovery chunks, hand-backs).
+    score over time (NaN where no check was needed), recovery chunks, hand-backs).
     """
 
     config_class = OcrJointConfig
@@ -222,6 +223,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             self.completed_stats.append(self.ocr_stats())
         self.base.reset()
         self._batch_size = None
+        self._any_recovering = False
         self._scores: list[torch.Tensor] = []
         self._modes: list[torch.Tensor] = []
         self._n_chunks = 0
@@ -245,8 +247,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         pose = batch[cfg.object_pose_key].to(torch.float32)
         if pose.ndim == 1:
             pose = pose.unsqueeze(0)
-        check_finite(pose, cfg.object_pose_key, "The object pose is missing for this step (is the tracker lost?).")
-        frames = self._pose_matrix(pose)
+        frames = self._pose_matrix(pose)  # rejects NaN/inf poses with a clear error
         state = batch[cfg.state_key].to(torch.float32).reshape(pose.shape[0], -1)
         return frames, self._keypoints(frames), state
 
@@ -284,6 +285,14 @@ class OcrJointPolicy(PreTrainedPolicy):
     def select_action(self, batch: dict[str, torch.Tensor], noise: torch.Tensor | None = None) -> torch.Tensor:
         """One action per row (B, A), world frame; `batch` is the env observation after our preprocessor."""
         cfg = self.config
+        if (
+            not cfg.check_every_step
+            and self._batch_size is not None
+            and not self._any_recovering
+            and (queued_actions(self.base) or 0) > 0
+        ):  # every row is inside a base chunk: decisions wait for its end (as the paper's joint policy)
+            self._record(torch.full((self._batch_size,), float("nan")), self._recovering)
+            return self._base_post(self.base.select_action(self._base_pre(dict(batch))))
         frames, keypoints, state = self._observation(batch)
         b, device = frames.shape[0], frames.device
         action_dim = cfg.output_features[ACTION].shape[0]
@@ -292,17 +301,18 @@ class OcrJointPolicy(PreTrainedPolicy):
         score = self.manifold.score(keypoints.double()).to(device)
         threshold = float(self.manifold.threshold_)
         ood = score < threshold
-        back_in = score >= threshold + cfg.hysteresis
+        if not (self._any_recovering or bool(ood.any())):  # every row on the base, in distribution
+            self._record(score, self._recovering)
+            return self._base_post(self.base.select_action(self._base_pre(dict(batch)))).to(device)
 
         # Rows that finished their recovery chunk: hand back to the base if in distribution again.
         done_chunk = self._recovering & (self._rec_left == 0)
-        handback = done_chunk & back_in
-        self._recovering &= ~handback
+        handback = done_chunk & (score >= threshold + cfg.hysteresis)
+        self._recovering = self._recovering & ~handback  # new tensors: the history keeps the old ones
         self._returned |= handback
         # Rows on the base that left the distribution start recovering (unless latched).
-        allowed = ~self._returned if cfg.latch else torch.ones_like(ood)
-        enter = ~self._recovering & ood & allowed
-        self._recovering |= enter
+        enter = ~self._recovering & ood & ~(self._returned & cfg.latch)
+        self._recovering = self._recovering | enter
         need_chunk = self._recovering & (self._rec_left == 0)
 
         if bool(need_chunk.any()):
@@ -316,18 +326,22 @@ class OcrJointPolicy(PreTrainedPolicy):
             drop_queued_actions(self.base)  # its queue was planned before or during the recovery
             self._n_handbacks += int(handback.sum())
 
-        base_action = self._base_action(batch, ~self._recovering)
+        rec = self._recovering
+        base_action = self._base_action(batch, ~rec)
         out = torch.zeros(b, action_dim, device=device)
         if base_action is not None:
-            out[~self._recovering] = base_action.to(device, out.dtype)[~self._recovering]
-        rec = self._recovering
+            out[~rec] = base_action.to(device, out.dtype)[~rec]
         if bool(rec.any()):
             step = cfg.n_recovery_action_steps - self._rec_left[rec]
             out[rec] = self._rec_actions[rec, step]
             self._rec_left[rec] -= 1
-        self._scores.append(score.detach().cpu())
-        self._modes.append(rec.detach().cpu().clone())
+        self._any_recovering = bool(rec.any())
+        self._record(score, rec)
         return out
+
+    def _record(self, score: torch.Tensor, recovering: torch.Tensor) -> None:
+        self._scores.append(score.cpu())
+        self._modes.append(recovering.cpu())
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, torch.Tensor], **kwargs) -> torch.Tensor:
@@ -345,8 +359,8 @@ class OcrJointPolicy(PreTrainedPolicy):
         """What the switch did since the last reset: per-row recovery fraction, score over time, counts."""
         if not self._scores:
             return {"steps": 0}
-        scores = torch.stack(self._scores).numpy()  # (T, B)
-        modes = torch.stack(self._modes).numpy()
+        scores = torch.stack(self._scores).cpu().numpy()  # (T, B)
+        modes = torch.stack(self._modes).cpu().numpy()
         return {
             "steps": int(scores.shape[0]),
             "threshold": float(self.manifold.threshold_),

@@ -170,6 +170,9 @@ def test_save_load_round_trip_gives_identical_actions(joint, id_pose, tmp_path, 
         actions.append(torch.stack([policy.select_action(dict(batch)) for _ in range(3)]))
     torch.testing.assert_close(actions[0], actions[1])
     assert loaded.ocr_stats()["in_recovery"][-1].tolist() == [False, True]
+    cfg = loaded.config
+    cfg.threshold = -1e9  # a run-time override (as --policy.threshold) beats the calibrated value
+    assert get_policy_class("ocr_joint").from_pretrained(tmp_path / "ckpt2", config=cfg).manifold.threshold_ == -1e9
 
 
 def test_push_to_hub_and_load_by_hub_id(joint, tmp_path, monkeypatch):

@@ -17,6 +17,7 @@ works in the object frame of the current pose (see `lerobot_ocr.inverse_policy`)
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 from pathlib import Path
@@ -42,6 +43,7 @@ from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfi
 
 BASE_DIR = "base"
 MODEL_FILE = "model.safetensors"
+KEYPOINTS_FILE = "object_keypoints.json"
 
 
 class OcrJointPolicy(PreTrainedPolicy):
@@ -69,7 +71,11 @@ class OcrJointPolicy(PreTrainedPolicy):
         super().__init__(config)
         config.validate_features()
         self.config = config
-        local = resolve_keypoints(config.object_keypoints)
+        bundled_keypoints = Path(bundle_dir) / KEYPOINTS_FILE if bundle_dir is not None else None
+        if bundled_keypoints is not None and bundled_keypoints.is_file():  # a file spec need not exist here
+            local = resolve_keypoints(str(bundled_keypoints))
+        else:
+            local = resolve_keypoints(config.object_keypoints)
         if local.shape[1] != config.object_dim:
             raise ValueError(
                 f"Keypoint spec mismatch: --policy.object_keypoints={config.object_keypoints!r} is {local.shape[1]}D "
@@ -382,6 +388,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         own = {k: v.contiguous() for k, v in sd.items() if not k.startswith(f"{BASE_DIR}.")}
         total = sum(t.numel() * t.element_size() for t in own.values())
         save_torch_state_dict(own, str(save_directory), max_shard_size=max(total, 1))
+        (save_directory / KEYPOINTS_FILE).write_text(json.dumps(self.object_keypoints_.tolist()))
         base_dir = save_directory / BASE_DIR
         self.base.save_pretrained(base_dir)
         self._base_pre.save_pretrained(base_dir)
@@ -418,6 +425,8 @@ class OcrJointPolicy(PreTrainedPolicy):
             config = PreTrainedConfig.from_pretrained(path, **kwargs)
         instance = cls(config, bundle_dir=path, **kwargs)
         cls._load_as_safetensor(instance, os.path.join(path, MODEL_FILE), config.device, strict)
+        if config.threshold is not None:  # e.g. lerobot-eval --policy.path=... --policy.threshold=...
+            instance.manifold.set_threshold(config.threshold)
         instance.to(config.device)
         instance.eval()
         return instance

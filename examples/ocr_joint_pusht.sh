@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Walk-through: give a Push-T diffusion policy an OOD recovery mode with ocr_joint.
 #   demos -> (your) base policy -> lerobot-ocr convert -> lerobot-train ocr_joint -> lerobot-eval (OOD starts)
-# Defaults are CPU-sized so that the whole thing runs in a few minutes (the policies are undertrained:
+# Defaults are CPU-sized so that the whole thing runs in about 8 minutes on 2 cores (the policies are undertrained:
 # this shows the commands, not the success rates; see benchmarks/ for those). Scale with the variables:
 #   DEMOS=100 BASE_STEPS=50000 OCR_STEPS=30000 EPISODES=50 DEVICE=cuda bash examples/ocr_joint_pusht.sh
 set -euo pipefail

@@ -43,6 +43,15 @@ def _convert(args: argparse.Namespace) -> int:
     return 0
 
 
+def _eval(args: argparse.Namespace) -> int:
+    from lerobot_ocr.eval_report import format_table, run_eval
+
+    result = run_eval(args.lerobot_eval_args)
+    print(json.dumps(result))
+    print("\n" + format_table({"eval": result}))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="lerobot-ocr", description="Object-Centric Recovery for LeRobot policies.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -86,10 +95,21 @@ def build_parser() -> argparse.ArgumentParser:
     conv.add_argument("--private", action="store_true", help="Make the hub repo private.")
     conv.add_argument("--overwrite", action="store_true", help="Replace an existing --output-root.")
     conv.set_defaults(func=_convert)
+
+    ev = sub.add_parser(
+        "eval",
+        help="Run lerobot-eval (same arguments) and add a summary table + ocr_stats.json (recovery fraction).",
+    )
+    ev.add_argument("lerobot_eval_args", nargs="*", help="Arguments for lerobot-eval, incl. --output_dir=…")
+    ev.set_defaults(func=_eval)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["eval"] and not {"-h", "--help"} & set(argv[1:]):
+        # lerobot-eval's own `--key=value` flags pass through untouched (argparse would claim them).
+        return _eval(argparse.Namespace(lerobot_eval_args=argv[1:]))
     args = build_parser().parse_args(argv)
     return args.func(args)
 

@@ -1,0 +1,103 @@
+"""`lerobot-ocr eval`: plain `lerobot-eval`, plus what ocr_joint did and a summary table.
+
+Runs LeRobot's own eval in-process with the arguments given (`--policy.path=… --env.type=… …`).
+When the policy is `ocr_joint`, its per-batch `ocr_stats()` are collected and written to
+`<output_dir>/ocr_stats.json` (mean fraction of steps in recovery, recovery chunks, hand-backs).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+
+def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """95% Wilson score interval of a success rate (sensible at 0/n and n/n too)."""
+    if n == 0:
+        return (0.0, 1.0)
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def _arg(args: list[str], name: str) -> str | None:
+    for a in args:
+        if a.startswith(f"--{name}="):
+            return a.split("=", 1)[1]
+    return None
+
+
+def summarize(eval_info: dict, ocr: dict | None) -> dict:
+    """success_rate, n_episodes, 95% interval, rewards (+ recovery fraction) of one lerobot-eval run."""
+    successes = [bool(s) for task in eval_info["per_task"] for s in task["metrics"]["successes"]]
+    n, k = len(successes), sum(successes)
+    lo, hi = wilson_interval(k, n)
+    out = {
+        "success_rate": k / n if n else float("nan"),
+        "n_episodes": n,
+        "ci95": [lo, hi],
+        "avg_max_reward": eval_info["overall"]["avg_max_reward"],
+        "eval_s": eval_info["overall"].get("eval_s"),
+    }
+    if ocr is not None:
+        out["mean_recovery_fraction"] = ocr["mean_recovery_fraction"]
+    return out
+
+
+def run_eval(args: list[str]) -> dict:
+    """Run lerobot-eval with `args` (CLI strings) in this process; return `summarize(...)`."""
+    from lerobot.scripts import lerobot_eval
+
+    from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
+
+    output_dir = _arg(args, "output_dir")
+    if output_dir is None:
+        raise ValueError("Pass --output_dir=… so that the results can be found.")
+    policies: list[OcrJointPolicy] = []
+    original_reset = OcrJointPolicy.reset
+
+    def reset(self):
+        if self not in policies:
+            policies.append(self)
+        original_reset(self)
+
+    OcrJointPolicy.reset = reset
+    argv = sys.argv
+    try:
+        sys.argv = ["lerobot-eval", *args]
+        lerobot_eval.main()
+    finally:
+        sys.argv = argv
+        OcrJointPolicy.reset = original_reset
+    eval_info = json.loads((Path(output_dir) / "eval_info.json").read_text())
+    ocr = None
+    if policies:
+        batches = [*policies[-1].completed_stats, policies[-1].ocr_stats()]
+        batches = [b for b in batches if b.get("steps")]
+        fractions = [f for b in batches for f in b["recovery_fraction"]]
+        ocr = {
+            "mean_recovery_fraction": sum(fractions) / len(fractions) if fractions else 0.0,
+            "recovery_chunks": sum(b["recovery_chunks"] for b in batches),
+            "handbacks": sum(b["handbacks"] for b in batches),
+            "threshold": batches[0]["threshold"] if batches else None,
+        }
+        (Path(output_dir) / "ocr_stats.json").write_text(json.dumps(ocr, indent=2))
+    return summarize(eval_info, ocr)
+
+
+def format_table(rows: dict[str, dict]) -> str:
+    """Markdown table of named `summarize` results."""
+    lines = [
+        "| run | success | 95% interval | episodes | avg max reward | steps in recovery |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, r in rows.items():
+        rec = f"{100 * r['mean_recovery_fraction']:.0f}%" if "mean_recovery_fraction" in r else "—"
+        lines.append(
+            f"| {name} | {r['success_rate']:.2f} | [{r['ci95'][0]:.2f}, {r['ci95'][1]:.2f}] | {r['n_episodes']} "
+            f"| {r['avg_max_reward']:.2f} | {rec} |"
+        )
+    return "\n".join(lines)

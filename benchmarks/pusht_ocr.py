@@ -109,6 +109,8 @@ def eval_args(policy: Path, region: str, p: dict, out: Path) -> list[str]:
         str(BIN / "lerobot-ocr"), "eval", f"--policy.path={policy}", "--env.type=pusht_ocr", f"--env.region={region}",
         f"--env.obs_type={obs}", f"--eval.n_episodes={p['episodes']}", f"--eval.batch_size={p['eval_batch']}",
         f"--policy.device={p['device']}", f"--seed={EVAL_SEED}", f"--output_dir={out}",
+        # CPU: one process; async workers would each spend ~10 s importing LeRobot on a 2-core machine.
+        f"--eval.use_async_envs={'true' if p['device'] != 'cpu' else 'false'}",
     ]  # fmt: skip
 
 

@@ -52,6 +52,11 @@ def _eval(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_hub_flags(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--push-to-hub", action="store_true", help="Upload the dataset to the hub under its repo id when done.")
+    parser.add_argument("--private", action="store_true", help="Make the hub repo private.")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="lerobot-ocr", description="Object-Centric Recovery for LeRobot policies.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -70,8 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
     gen.add_argument("--repo-id", default="local/pusht_ocr", help="Dataset repo id (for the hub and metadata).")
     gen.add_argument("--seed", type=int, default=0, help="Attempt j uses env seed SEED + j.")
     gen.add_argument("--no-videos", action="store_true", help="Store images in parquet instead of mp4 videos.")
-    gen.add_argument("--push-to-hub", action="store_true", help="Upload to the hub under --repo-id when done.")
-    gen.add_argument("--private", action="store_true", help="Make the hub repo private.")
+    _add_hub_flags(gen)
     gen.add_argument("--keep-work", action="store_true", help="Keep the per-episode cache <root>.work/.")
     gen.set_defaults(func=_generate)
 
@@ -91,8 +95,7 @@ def build_parser() -> argparse.ArgumentParser:
     conv.add_argument("--output-repo-id", default=None, help="Repo id of the converted dataset (default <repo-id>_ocr).")
     conv.add_argument("--pose-rotation", default=None, help="Pose representation: angle (2D) | quat_wxyz | quat_xyzw | axis_angle | rot6d.")
     conv.add_argument("--source-keypoints", default=None, help="Layout of a keypoints:<name> source (default: --object).")
-    conv.add_argument("--push-to-hub", action="store_true", help="Upload the converted dataset under its repo id.")
-    conv.add_argument("--private", action="store_true", help="Make the hub repo private.")
+    _add_hub_flags(conv)
     conv.add_argument("--overwrite", action="store_true", help="Replace an existing --output-root.")
     conv.set_defaults(func=_convert)
 

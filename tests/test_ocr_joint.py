@@ -50,7 +50,9 @@ def test_fit_on_dataset(joint, id_pose):
     assert joint.manifold.is_fitted and joint.manifold.is_calibrated
     assert joint.inverse.fitted_.item()
     scores = joint.manifold.score(joint._tbl_keypoints.double())
-    assert (scores < joint.manifold.threshold_).float().mean().item() == pytest.approx(0.02, abs=0.01)
+    calibrated = joint.calibrated_threshold_
+    assert (scores < calibrated).float().mean().item() == pytest.approx(0.02, abs=0.01)
+    assert joint.manifold.threshold_ == pytest.approx(calibrated - joint.config.threshold_margin)
     ood_keypoints = joint._keypoints(joint._pose_matrix(torch.tensor([OOD_POSE])))
     assert joint.manifold.score(ood_keypoints.double()) < joint.manifold.threshold_
     assert not any(p.requires_grad for p in joint.base.parameters())
@@ -171,7 +173,10 @@ def test_save_load_round_trip_gives_identical_actions(joint, id_pose, tmp_path, 
     torch.testing.assert_close(actions[0], actions[1])
     assert loaded.ocr_stats()["in_recovery"][-1].tolist() == [False, True]
     cfg = loaded.config
-    cfg.threshold = -1e9  # a run-time override (as --policy.threshold) beats the calibrated value
+    cfg.threshold_margin = 0.5  # run-time overrides, as --policy.threshold_margin / --policy.threshold
+    reloaded = get_policy_class("ocr_joint").from_pretrained(tmp_path / "ckpt2", config=cfg)
+    assert reloaded.manifold.threshold_ == pytest.approx(joint.calibrated_threshold_ - 0.5)
+    cfg.threshold = -1e9
     assert get_policy_class("ocr_joint").from_pretrained(tmp_path / "ckpt2", config=cfg).manifold.threshold_ == -1e9
 
 

@@ -82,6 +82,8 @@ class OcrJointPolicy(PreTrainedPolicy):
                 f"but pose_rotation={config.pose_rotation!r} poses are {config.object_dim}D."
             )
         self.register_buffer("object_keypoints_", torch.as_tensor(local, dtype=torch.float32))
+        # The threshold calibrated on the training frames, before `threshold_margin` (so it can change at eval).
+        self.register_buffer("calibrated_threshold_", torch.tensor(float("nan"), dtype=torch.float64))
         k, d = local.shape
         state_dim = config.input_features[config.state_key].shape[0]
         action_dim = config.output_features[ACTION].shape[0]
@@ -194,8 +196,8 @@ class OcrJointPolicy(PreTrainedPolicy):
     def _fit_from_table(self) -> None:
         cfg = self.config
         self.manifold.fit(self._tbl_keypoints.double(), calibration_quantile=cfg.calibration_quantile)
-        if cfg.threshold is not None:
-            self.manifold.set_threshold(cfg.threshold)
+        self.calibrated_threshold_.fill_(float(self.manifold.threshold_))
+        self.apply_threshold()
         n = len(self._tbl_index)
         gen = torch.Generator().manual_seed(0)
         starts = torch.randperm(n, generator=gen)[: cfg.max_normalization_windows]
@@ -206,6 +208,15 @@ class OcrJointPolicy(PreTrainedPolicy):
             "ocr_joint: fitted the keypoint manifold on %d frames (threshold %.3f, %s)",
             n, float(self.manifold.threshold_), cfg.score_type,
         )  # fmt: skip
+
+    def apply_threshold(self) -> float:
+        """Set the switch threshold from the config: `threshold` if given, else calibrated - `threshold_margin`."""
+        cfg = self.config
+        if cfg.threshold is not None:
+            self.manifold.set_threshold(cfg.threshold)
+        elif bool(torch.isfinite(self.calibrated_threshold_)):
+            self.manifold.set_threshold(float(self.calibrated_threshold_) - cfg.threshold_margin)
+        return float(self.manifold.threshold_)
 
     def forward(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, None]:
         """Inverse-policy diffusion loss on the windows that start at the batch's frames (`index`)."""
@@ -425,8 +436,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             config = PreTrainedConfig.from_pretrained(path, **kwargs)
         instance = cls(config, bundle_dir=path, **kwargs)
         cls._load_as_safetensor(instance, os.path.join(path, MODEL_FILE), config.device, strict)
-        if config.threshold is not None:  # e.g. lerobot-eval --policy.path=... --policy.threshold=...
-            instance.manifold.set_threshold(config.threshold)
+        instance.apply_threshold()  # run-time overrides: --policy.threshold / --policy.threshold_margin
         instance.to(config.device)
         instance.eval()
         return instance

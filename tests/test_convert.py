@@ -77,9 +77,19 @@ def test_errors_are_clear(pusht_dataset, tmp_path):
         convert_dataset(
             "local/pusht_ocr", tmp_path / "c", "axes:0.05", "feature:observation.object_pose", **kw
         )
-    nan_pose = lambda frame: np.full(3, np.nan)  # noqa: E731
-    with pytest.raises(ValueError, match="NaN/inf poses for .* frames \\(first: episode 0, frame 0\\)"):
-        convert_dataset("local/pusht_ocr", tmp_path / "d", "pusht_t", nan_pose, **kw)
+    assert not list(tmp_path.glob("*.work")) and not list(tmp_path.glob("*.tmp"))  # failures leave no clutter
+    calls, fixed = [], []
+
+    def flaky(frame):  # NaN on frame 3 until the "bug" is fixed
+        calls.append(int(frame["index"]))
+        return np.full(3, np.nan) if int(frame["index"]) == 3 and not fixed else frame["observation.object_pose"].numpy()
+
+    with pytest.raises(ValueError, match="NaN/inf poses for 1 of .* frames \\(first: episode 0, frame 3\\)"):
+        convert_dataset("local/pusht_ocr", tmp_path / "d", "pusht_t", flaky, **kw)
+    calls.clear()
+    fixed.append(True)
+    convert_dataset("local/pusht_ocr", tmp_path / "d", "pusht_t", flaky, **kw)  # the fixed estimator
+    assert calls == [3]  # only the failed frame is estimated again
     (tmp_path / "e").mkdir()
     with pytest.raises(FileExistsError, match="--overwrite"):
         convert_dataset("local/pusht_ocr", tmp_path / "e", "pusht_t", "feature:observation.object_pose", **kw)

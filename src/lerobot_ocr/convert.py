@@ -76,9 +76,11 @@ def _check_poses(poses: np.ndarray, episode: np.ndarray, frame: np.ndarray, sour
 def _poses_from_estimator(dataset, estimator: Callable, rotation: str, work: Path) -> np.ndarray:
     """Call `estimator` on every decoded frame; cache results in `work` so a re-run resumes."""
     n, size = len(dataset), pose_size(rotation)
+    work.mkdir(parents=True, exist_ok=True)
     cache, done_path = work / "poses.npy", work / "done.npy"
     if cache.exists() and done_path.exists() and len(np.load(done_path)) == n:
         poses, done = np.load(cache), np.load(done_path)
+        done &= np.isfinite(poses).all(-1)  # frames the estimator failed on are tried again
     else:
         poses, done = np.full((n, size), np.nan), np.zeros(n, dtype=bool)
 
@@ -179,7 +181,6 @@ def convert_dataset(
             raise FileExistsError(f"{output_root} already exists; pass --overwrite or choose another --output-root.")
     staging = output_root.with_name(output_root.name + ".tmp")
     work = output_root.with_name(output_root.name + ".work")
-    work.mkdir(parents=True, exist_ok=True)
 
     dataset = LeRobotDataset(repo_id, root=root)
     features = dataset.meta.features

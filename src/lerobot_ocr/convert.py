@@ -28,6 +28,7 @@ import numpy as np
 from tqdm import tqdm
 
 from lerobot_ocr.dataset_columns import read_columns
+from lerobot_ocr.files import atomic_save_npy
 from lerobot_ocr.geometry import matrix_to_pose, pose_size, pose_to_matrix
 from lerobot_ocr.keypoints import keypoints_to_pose, pose_to_keypoints, resolve_keypoints
 from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OBS_OBJECT_KEYPOINTS, OBS_OBJECT_POSE
@@ -85,10 +86,8 @@ def _poses_from_estimator(dataset, estimator: Callable, rotation: str, work: Pat
         poses, done = np.full((n, size), np.nan), np.zeros(n, dtype=bool)
 
     def flush():
-        for arr, path in ((poses, cache), (done, done_path)):
-            tmp = path.with_name(path.stem + ".tmp.npy")
-            np.save(tmp, arr)
-            tmp.replace(path)
+        atomic_save_npy(cache, poses)
+        atomic_save_npy(done_path, done)
 
     todo = np.flatnonzero(~done)
     for j, i in enumerate(tqdm(todo, desc="Estimating object poses", unit="frame")):

@@ -25,6 +25,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from lerobot_ocr.files import atomic_write
 from lerobot_ocr.validation import check_finite, check_trailing_shape
 
 
@@ -357,10 +358,8 @@ class KeypointManifold(nn.Module):
         meta = {"hyperparameters": json.dumps(self.hyperparameters()), "format": "lerobot_ocr.KeypointManifold/1"}
         if self.calibration_quantile is not None:
             meta["calibration_quantile"] = repr(self.calibration_quantile)
-        tmp = path.with_suffix(path.suffix + ".tmp")
-        save_file({k: v.contiguous() for k, v in self.state_dict().items()}, str(tmp), metadata=meta)
-        tmp.replace(path)
-        return path
+        tensors = {k: v.contiguous() for k, v in self.state_dict().items()}
+        return atomic_write(path, lambda tmp: save_file(tensors, str(tmp), metadata=meta))
 
     @classmethod
     def load(cls, path: str | Path) -> KeypointManifold:

@@ -19,6 +19,7 @@ import numpy as np
 from tqdm import tqdm
 
 from lerobot_ocr.envs.configs import PUSHT_TASK as TASK
+from lerobot_ocr.files import atomic_write
 
 FPS = 10
 
@@ -38,12 +39,6 @@ def pusht_features(use_videos: bool = True) -> dict:
         "next.success": {"dtype": "bool", "shape": (1,), "names": None},
         "next.done": {"dtype": "bool", "shape": (1,), "names": None},
     }
-
-
-def _atomic_write_bytes(path: Path, write) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    write(tmp)
-    tmp.replace(path)
 
 
 def record_episode(env, expert, seed: int, max_steps: int = 300) -> dict[str, np.ndarray] | None:
@@ -71,13 +66,18 @@ def record_episode(env, expert, seed: int, max_steps: int = 300) -> dict[str, np
     return None
 
 
+def _save_episode(path: Path, seed: int, data: dict[str, np.ndarray]) -> None:
+    with open(path, "wb") as f:  # a file object: np.savez would append .npz to the .tmp name
+        np.savez_compressed(f, seed=seed, **data)
+
+
 def _load_ledger(work: Path) -> dict:
     path = work / "ledger.json"
     return json.loads(path.read_text()) if path.exists() else {"tried": {}}
 
 
 def _save_ledger(work: Path, ledger: dict) -> None:
-    _atomic_write_bytes(work / "ledger.json", lambda p: p.write_text(json.dumps(ledger)))
+    atomic_write(work / "ledger.json", lambda p: p.write_text(json.dumps(ledger)))
 
 
 def _build_dataset(episodes: list[Path], root: Path, repo_id: str, use_videos: bool):
@@ -159,7 +159,7 @@ def generate_pusht(
             data = record_episode(env, expert, ep_seed)
             if data is not None:
                 path = work / f"episode_{attempt:06d}.npz"
-                _atomic_write_bytes(path, lambda p: np.savez_compressed(open(p, "wb"), seed=ep_seed, **data))
+                atomic_write(path, lambda p: _save_episode(p, ep_seed, data))
                 done.append(path)
                 bar.update(1)
             ledger["tried"][str(attempt)] = {"seed": ep_seed, "success": data is not None}

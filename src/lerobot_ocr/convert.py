@@ -101,27 +101,36 @@ def _poses_from_estimator(dataset, estimator: Callable, rotation: str, work: Pat
     return poses
 
 
+def source_feature(pose_from: str | Callable, features: dict, repo_id: str) -> str | None:
+    """The dataset feature a `feature:`/`keypoints:` pose source reads (None for an estimator); validates it."""
+    if callable(pose_from) or str(pose_from).startswith("estimator:"):
+        return None
+    kind, _, name = str(pose_from).partition(":")
+    if kind not in ("feature", "keypoints") or not name:
+        raise ValueError(
+            f"Unknown --pose-from {pose_from!r}: use 'feature:<name>', 'keypoints:<name>' or 'estimator:<module>:<fn>'."
+        )
+    _feature_info(features, name, repo_id)
+    return name
+
+
 def compute_object_poses(
-    root: Path,
-    repo_id: str,
-    features: dict,
+    columns: dict[str, np.ndarray],
     pose_from: str | Callable,
     rotation: str,
     source_keypoints: np.ndarray,
     work: Path,
     dataset=None,
 ) -> np.ndarray:
-    """(N, P) object poses of every frame in the dataset's file order, from the chosen source."""
+    """(N, P) object poses of every frame in the dataset's file order, from the chosen source.
+
+    `columns` holds the source feature's column (see `source_feature`), read with `read_columns`.
+    """
     if callable(pose_from) or str(pose_from).startswith("estimator:"):
         fn = pose_from if callable(pose_from) else load_callable(str(pose_from).split(":", 1)[1])
         return _poses_from_estimator(dataset, fn, rotation, work)
     kind, _, name = str(pose_from).partition(":")
-    if kind not in ("feature", "keypoints") or not name:
-        raise ValueError(
-            f"Unknown --pose-from {pose_from!r}: use 'feature:<name>', 'keypoints:<name>' or 'estimator:<module>:<fn>'."
-        )
-    info = _feature_info(features, name, repo_id)
-    values = read_columns(root, [name])[name].astype(np.float64).reshape(-1, int(np.prod(info["shape"])))
+    values = columns[name].astype(np.float64).reshape(len(columns[name]), -1)
     if kind == "feature":
         if values.shape[1] != pose_size(rotation):
             raise ValueError(
@@ -183,9 +192,11 @@ def convert_dataset(
 
     dataset = LeRobotDataset(repo_id, root=root)
     features = dataset.meta.features
-    hints = read_columns(dataset.root, [])
-    poses = compute_object_poses(dataset.root, repo_id, features, pose_from, rotation, src_kps, work, dataset)
-    _check_poses(poses, hints["episode_index"], hints["frame_index"], str(pose_from))
+    source = source_feature(pose_from, features, repo_id)
+    has_pose = OBS_OBJECT_POSE in features
+    columns = read_columns(dataset.root, [k for k in (source, OBS_OBJECT_POSE if has_pose else None) if k])
+    poses = compute_object_poses(columns, pose_from, rotation, src_kps, work, dataset)
+    _check_poses(poses, columns["episode_index"], columns["frame_index"], str(pose_from))
     keypoints = pose_to_keypoints(pose_to_matrix(poses, rotation), local)  # (N, K, D) world
 
     dims = "xyz"[:d]
@@ -195,8 +206,8 @@ def convert_dataset(
             {"dtype": "float32", "shape": (k * d,), "names": [f"kp{i}_{c}" for i in range(k) for c in dims]},
         )
     }
-    if OBS_OBJECT_POSE in features:
-        existing = read_columns(dataset.root, [OBS_OBJECT_POSE])[OBS_OBJECT_POSE].reshape(len(poses), -1)
+    if has_pose:
+        existing = columns[OBS_OBJECT_POSE].reshape(len(poses), -1)
         if existing.shape[1] != poses.shape[1] or not np.allclose(existing, poses, atol=1e-3):
             raise ValueError(
                 f"Dataset {repo_id} already has {OBS_OBJECT_POSE!r} and it differs from the poses of {pose_from!r}. "

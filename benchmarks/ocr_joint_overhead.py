@@ -35,7 +35,7 @@ HERE = Path(__file__).resolve().parent
 OOD_POSE = [400.0, 120.0, 0.5]
 
 
-def build(work: Path, episodes: int, batch: int):
+def build(work: Path, episodes: int):
     from lerobot.datasets import LeRobotDatasetMetadata
     from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
     from lerobot.policies.factory import make_policy, make_pre_post_processors
@@ -141,7 +141,7 @@ def main() -> None:
 
     work = Path(tempfile.mkdtemp(prefix="ocr_overhead_"))
     try:
-        (base, bpre, bpost), (joint, jpre, jpost), id_pose = build(work, args.episodes, args.batch)
+        (base, bpre, bpost), (joint, jpre, jpost), id_pose = build(work, args.episodes)
         runs = {"base_id": [], "joint_id": [], "joint_every_id": [], "base_ood": [], "joint_ood": []}
         for _ in range(args.repeats):  # interleave, so that machine noise hits both alike
             runs["base_id"].append(summary(time_steps(base, bpre, bpost, id_pose, args.batch, args.steps)))

@@ -17,13 +17,19 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _generate(args: argparse.Namespace) -> int:
-    from lerobot_ocr.datagen.pusht import generate_pusht
-
-    ds = generate_pusht(
-        args.root, episodes=args.episodes, region=args.region, repo_id=args.repo_id, seed=args.seed,
+    common = dict(
+        episodes=args.episodes, region=args.region, repo_id=args.repo_id or f"local/{args.task}_ocr", seed=args.seed,
         use_videos=not args.no_videos, push_to_hub=args.push_to_hub, private=args.private, keep_work=args.keep_work,
     )  # fmt: skip
-    print(f"Wrote {ds.meta.total_episodes} episodes / {ds.meta.total_frames} frames to {args.root} (repo_id {args.repo_id}).")
+    if args.task == "pusht":
+        from lerobot_ocr.datagen.pusht import generate_pusht
+
+        ds = generate_pusht(args.root, **common)
+    else:
+        from lerobot_ocr.datagen.square import generate_square
+
+        ds = generate_square(args.root, images=not args.no_images, **common)
+    print(f"Wrote {ds.meta.total_episodes} episodes / {ds.meta.total_frames} frames to {args.root} (repo_id {ds.repo_id}).")
     return 0
 
 
@@ -68,13 +74,14 @@ def build_parser() -> argparse.ArgumentParser:
     demo.set_defaults(func=_demo)
 
     gen = sub.add_parser("generate", help="Generate scripted-expert demonstrations as a LeRobotDataset.")
-    gen.add_argument("task", choices=["pusht"], help="Which task.")
+    gen.add_argument("task", choices=["pusht", "square"], help="Which task (square needs the [square] extra).")
     gen.add_argument("--region", choices=["id", "ood", "all"], default="id", help="Start region of the demos.")
-    gen.add_argument("--episodes", type=int, default=100, help="Successful episodes to keep.")
+    gen.add_argument("--episodes", type=int, default=100, help="Successful episodes to keep (paper: 100 Push-T, 200 Square).")
     gen.add_argument("--root", required=True, help="Output folder of the dataset (resumes if interrupted).")
-    gen.add_argument("--repo-id", default="local/pusht_ocr", help="Dataset repo id (for the hub and metadata).")
+    gen.add_argument("--repo-id", default=None, help="Dataset repo id (for the hub and metadata; default local/<task>_ocr).")
     gen.add_argument("--seed", type=int, default=0, help="Attempt j uses env seed SEED + j.")
     gen.add_argument("--no-videos", action="store_true", help="Store images in parquet instead of mp4 videos.")
+    gen.add_argument("--no-images", action="store_true", help="square: record low-dim observations only (no cameras).")
     _add_hub_flags(gen)
     gen.add_argument("--keep-work", action="store_true", help="Keep the per-episode cache <root>.work/.")
     gen.set_defaults(func=_generate)

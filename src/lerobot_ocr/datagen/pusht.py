@@ -4,22 +4,18 @@ Features match the hub's `lerobot/pusht` (96x96 `observation.image`, `observatio
 `action`, `next.reward`, `next.success`, `next.done`) plus `observation.environment_state` (the 8 T
 corners, as `lerobot/pusht_keypoints`) and `observation.object_pose` (block x, y, theta). fps 10.
 
-Safe to interrupt: every successful episode is first saved atomically as an .npz in `<root>.work/`
-(with a ledger of the seeds tried), so a re-run resumes where it stopped. The dataset is then built
-in `<root>.tmp/` and renamed to `<root>` only once finalized, so `<root>` is never left half-written.
+Safe to interrupt and resumable (`lerobot_ocr.datagen.recording`).
 """
 
 from __future__ import annotations
 
-import json
-import shutil
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
+from lerobot_ocr.datagen.recording import build_dataset, collect_episodes, finish, work_dir
 from lerobot_ocr.envs.configs import PUSHT_TASK as TASK
-from lerobot_ocr.files import atomic_write
 
 FPS = 10
 
@@ -66,54 +62,20 @@ def record_episode(env, expert, seed: int, max_steps: int = 300) -> dict[str, np
     return None
 
 
-def _save_episode(path: Path, seed: int, data: dict[str, np.ndarray]) -> None:
-    with open(path, "wb") as f:  # a file object: np.savez would append .npz to the .tmp name
-        np.savez_compressed(f, seed=seed, **data)
-
-
-def _load_ledger(work: Path) -> dict:
-    path = work / "ledger.json"
-    return json.loads(path.read_text()) if path.exists() else {"tried": {}}
-
-
-def _save_ledger(work: Path, ledger: dict) -> None:
-    atomic_write(work / "ledger.json", lambda p: p.write_text(json.dumps(ledger)))
-
-
-def _build_dataset(episodes: list[Path], root: Path, repo_id: str, use_videos: bool):
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
-
-    staging = root.with_name(root.name + ".tmp")
-    if staging.exists():
-        shutil.rmtree(staging)
-    ds = LeRobotDataset.create(
-        repo_id=repo_id, fps=FPS, features=pusht_features(use_videos), root=staging, robot_type="2d pointer",
-        use_videos=use_videos,
-    )  # fmt: skip
-    for path in tqdm(episodes, desc="Writing LeRobotDataset", unit="episode"):
-        ep = np.load(path)
-        n = len(ep["action"])
-        for i in range(n):
-            last = i == n - 1
-            ds.add_frame(
-                {
-                    "observation.image": ep["image"][i],
-                    "observation.state": ep["state"][i].astype(np.float32),
-                    "observation.environment_state": ep["env_state"][i].astype(np.float32),
-                    "observation.object_pose": ep["pose"][i].astype(np.float32),
-                    "action": ep["action"][i].astype(np.float32),
-                    "next.reward": np.array([ep["reward"][i]], dtype=np.float32),
-                    "next.success": np.array([ep["success"][i]], dtype=bool),
-                    "next.done": np.array([last], dtype=bool),
-                    "task": TASK,
-                }
-            )
-        ds.save_episode()
-    ds.finalize()
-    if root.exists():
-        shutil.rmtree(root)
-    staging.replace(root)
-    return LeRobotDataset(repo_id, root=root)
+def _frames(ep) -> Iterator[dict]:
+    n = len(ep["action"])
+    for i in range(n):
+        yield {
+            "observation.image": ep["image"][i],
+            "observation.state": ep["state"][i].astype(np.float32),
+            "observation.environment_state": ep["env_state"][i].astype(np.float32),
+            "observation.object_pose": ep["pose"][i].astype(np.float32),
+            "action": ep["action"][i].astype(np.float32),
+            "next.reward": np.array([ep["reward"][i]], dtype=np.float32),
+            "next.success": np.array([ep["success"][i]], dtype=bool),
+            "next.done": np.array([i == n - 1], dtype=bool),
+            "task": TASK,
+        }
 
 
 def generate_pusht(
@@ -136,41 +98,13 @@ def generate_pusht(
     from lerobot_ocr.experts.pusht_expert import PushTExpert
 
     root = Path(root)
-    if root.exists() and not (root / "meta" / "info.json").exists():
-        raise FileExistsError(f"{root} exists and is not a LeRobotDataset; choose another --root.")
-    work = root.with_name(root.name + ".work")
-    work.mkdir(parents=True, exist_ok=True)
-    ledger = _load_ledger(work)
-    params = {"region": region, "seed": seed}
-    if ledger.get("params", params) != params:
-        raise ValueError(
-            f"{work} holds episodes generated with {ledger['params']}, not {params}. "
-            "Use the same settings to resume, or another --root."
-        )
-    ledger["params"] = params
-    done = sorted(work.glob("episode_*.npz"))
-    max_attempts = max_attempts or 3 * episodes + 20
+    work = work_dir(root)
     env = make_pusht_ocr_env(region=region, obs_type="pixels_agent_pos")
     expert = PushTExpert(seed=seed)
-    attempt = max((int(k) for k in ledger["tried"]), default=-1) + 1
-    with tqdm(total=episodes, initial=min(len(done), episodes), desc=f"Push-T expert demos ({region})", unit="episode") as bar:
-        while len(done) < episodes and attempt < max_attempts:
-            ep_seed = seed + attempt
-            data = record_episode(env, expert, ep_seed)
-            if data is not None:
-                path = work / f"episode_{attempt:06d}.npz"
-                atomic_write(path, lambda p: _save_episode(p, ep_seed, data))
-                done.append(path)
-                bar.update(1)
-            ledger["tried"][str(attempt)] = {"seed": ep_seed, "success": data is not None}
-            _save_ledger(work, ledger)
-            attempt += 1
+    paths = collect_episodes(
+        work, {"region": region, "seed": seed}, episodes, seed, lambda s: record_episode(env, expert, s),
+        desc=f"Push-T expert demos ({region})", max_attempts=max_attempts,
+    )  # fmt: skip
     env.close()
-    if len(done) < episodes:
-        raise RuntimeError(f"Only {len(done)} successful episodes after {attempt} attempts (asked for {episodes}).")
-    ds = _build_dataset(sorted(done)[:episodes], root, repo_id, use_videos)
-    if push_to_hub:
-        ds.push_to_hub(private=private)
-    if not keep_work:
-        shutil.rmtree(work)
-    return ds
+    ds = build_dataset(paths, root, repo_id, FPS, pusht_features(use_videos), "2d pointer", use_videos, _frames)
+    return finish(ds, work, push_to_hub, private, keep_work)

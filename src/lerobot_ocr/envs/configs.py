@@ -8,10 +8,19 @@ from functools import partial
 import gymnasium as gym
 from lerobot.configs import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
-from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGE, OBS_STATE
+from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGE, OBS_IMAGES, OBS_STATE
 
 OBS_OBJECT_POSE = "observation.object_pose"
 PUSHT_TASK = "Push the T-shaped block onto the T-shaped target."
+SQUARE_TASK = "Pick up the square nut and place it over the square peg."
+
+
+def _vector_env(factory, n_envs: int, use_async_envs: bool) -> gym.vector.VectorEnv:
+    if use_async_envs and n_envs > 1:
+        vec_cls, extra = gym.vector.AsyncVectorEnv, {"context": "forkserver"}
+    else:
+        vec_cls, extra = gym.vector.SyncVectorEnv, {}
+    return vec_cls([factory] * n_envs, autoreset_mode=gym.vector.AutoresetMode.SAME_STEP, **extra)
 
 
 def _make_pusht_ocr(kwargs: dict):
@@ -94,10 +103,86 @@ class PushtOcrEnvConfig(EnvConfig):
         }
 
     def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
-        factory = partial(_make_pusht_ocr, self.gym_kwargs)
-        if use_async_envs and n_envs > 1:
-            vec_cls, extra = gym.vector.AsyncVectorEnv, {"context": "forkserver"}
+        return {self.type: {0: _vector_env(partial(_make_pusht_ocr, self.gym_kwargs), n_envs, use_async_envs)}}
+
+
+def _make_square_ocr(kwargs: dict):
+    # Module-level factory (picklable); imports robosuite only here, robosuite builds its sim on reset.
+    from lerobot_ocr.envs.square_env import NutStartRegions, make_square_ocr_env
+
+    kwargs = dict(kwargs)
+    kwargs["regions"] = NutStartRegions(**kwargs["regions"])
+    return make_square_ocr_env(**kwargs)
+
+
+@EnvConfig.register_subclass("square_ocr")
+@dataclass
+class SquareOcrEnvConfig(EnvConfig):
+    """Robomimic-style Square (robosuite, Panda) with ID/OOD nut starts: `--env.type=square_ocr --env.region=ood`.
+
+    Needs `pip install 'lerobot_policy_ocr[square]'` (robosuite, mujoco < 4; images: MUJOCO_GL=egl).
+    region: "id" (robosuite's default nut box, x in [-0.115, -0.11], y in [0.11, 0.225], any yaw),
+    "ood" (the same starts shifted by dy in [-0.35, -0.20], dx in [-0.01, 0.01]) or "all"; move the
+    boxes with id_x / id_y / ood_dx / ood_dy. Actions (10,) = absolute eef [xyz, rot6d, gripper] in
+    the world frame. obs_type "environment_state_agent_pos" (eef pose + gripper, nut state) or
+    "pixels_agent_pos" (agentview + wrist cameras + eef pose + gripper). Always: the nut pose as
+    `observation.object_pose` [x, y, z, qw, qx, qy, qz].
+    """
+
+    task: str | None = "SquareOcr-v0"
+    fps: int = 20
+    episode_length: int = 400
+    obs_type: str = "environment_state_agent_pos"
+    render_mode: str = "rgb_array"
+    region: str = "ood"
+    id_x: tuple[float, float] = (-0.115, -0.11)
+    id_y: tuple[float, float] = (0.11, 0.225)
+    ood_dx: tuple[float, float] = (-0.01, 0.01)
+    ood_dy: tuple[float, float] = (-0.35, -0.20)
+    observation_size: int = 84
+    visualization_size: int = 256
+    features: dict[str, PolicyFeature] = field(
+        default_factory=lambda: {
+            ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(10,)),
+            "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(11,)),
+        }
+    )
+    features_map: dict[str, str] = field(
+        default_factory=lambda: {
+            ACTION: ACTION,
+            "agent_pos": OBS_STATE,
+            "environment_state": OBS_ENV_STATE,
+            "pixels/agentview": f"{OBS_IMAGES}.agentview",
+            "pixels/wrist": f"{OBS_IMAGES}.wrist",
+            "object_pose": OBS_OBJECT_POSE,
+        }
+    )
+
+    def __post_init__(self):
+        if self.region not in ("id", "ood", "all"):
+            raise ValueError(f"--env.region must be 'id', 'ood' or 'all', got {self.region!r}.")
+        if self.obs_type == "pixels_agent_pos":
+            image = PolicyFeature(type=FeatureType.VISUAL, shape=(self.observation_size, self.observation_size, 3))
+            self.features["pixels/agentview"] = image
+            self.features["pixels/wrist"] = image
+        elif self.obs_type == "environment_state_agent_pos":
+            self.features["environment_state"] = PolicyFeature(type=FeatureType.ENV, shape=(12,))
         else:
-            vec_cls, extra = gym.vector.SyncVectorEnv, {}
-        vec = vec_cls([factory] * n_envs, autoreset_mode=gym.vector.AutoresetMode.SAME_STEP, **extra)
-        return {self.type: {0: vec}}
+            raise ValueError(
+                f"--env.obs_type must be 'pixels_agent_pos' or 'environment_state_agent_pos', got {self.obs_type!r}."
+            )
+
+    @property
+    def gym_kwargs(self) -> dict:
+        return {
+            "obs_type": self.obs_type,
+            "region": self.region,
+            "regions": {"id_x": tuple(self.id_x), "id_y": tuple(self.id_y), "ood_dx": tuple(self.ood_dx), "ood_dy": tuple(self.ood_dy)},
+            "observation_size": self.observation_size,
+            "render_mode": self.render_mode,
+            "visualization_size": self.visualization_size,
+            "max_episode_steps": self.episode_length,
+        }
+
+    def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
+        return {self.type: {0: _vector_env(partial(_make_square_ocr, self.gym_kwargs), n_envs, use_async_envs)}}

@@ -1,0 +1,112 @@
+"""Resumable expert-demo recording shared by the task generators.
+
+Two steps, both safe to interrupt:
+1. `collect_episodes`: attempt j rolls the expert out from env seed `seed + j`; every successful
+   episode is saved atomically as `<root>.work/episode_<j>.npz`, and a ledger records the attempts,
+   so a re-run resumes where it stopped (and refuses a work dir made with other settings).
+2. `build_dataset`: the cached episodes become a LeRobotDataset v3 in `<root>.tmp/`, renamed to
+   `<root>` only once finalized, so `<root>` is never half-written.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from lerobot_ocr.files import atomic_write
+
+
+def work_dir(root: Path) -> Path:
+    if root.exists() and not (root / "meta" / "info.json").exists():
+        raise FileExistsError(f"{root} exists and is not a LeRobotDataset; choose another --root.")
+    work = root.with_name(root.name + ".work")
+    work.mkdir(parents=True, exist_ok=True)
+    return work
+
+
+def _save_episode(path: Path, seed: int, data: dict[str, np.ndarray]) -> None:
+    with open(path, "wb") as f:  # a file object: np.savez would append .npz to the .tmp name
+        np.savez_compressed(f, seed=seed, **data)
+
+
+def collect_episodes(
+    work: Path,
+    params: dict,
+    episodes: int,
+    seed: int,
+    record: Callable[[int], dict[str, np.ndarray] | None],
+    desc: str,
+    max_attempts: int | None = None,
+) -> list[Path]:
+    """Cache `episodes` successful episodes in `work`; `record(env_seed)` returns arrays or None (failed)."""
+    ledger_path = work / "ledger.json"
+    ledger = json.loads(ledger_path.read_text()) if ledger_path.exists() else {"tried": {}}
+    if ledger.get("params", params) != params:
+        raise ValueError(
+            f"{work} holds episodes generated with {ledger['params']}, not {params}. "
+            "Use the same settings to resume, or another --root."
+        )
+    ledger["params"] = params
+    done = sorted(work.glob("episode_*.npz"))
+    max_attempts = max_attempts or 3 * episodes + 20
+    attempt = max((int(k) for k in ledger["tried"]), default=-1) + 1
+    with tqdm(total=episodes, initial=min(len(done), episodes), desc=desc, unit="episode") as bar:
+        while len(done) < episodes and attempt < max_attempts:
+            ep_seed = seed + attempt
+            data = record(ep_seed)
+            if data is not None:
+                path = work / f"episode_{attempt:06d}.npz"
+                atomic_write(path, lambda p: _save_episode(p, ep_seed, data))
+                done.append(path)
+                bar.update(1)
+            ledger["tried"][str(attempt)] = {"seed": ep_seed, "success": data is not None}
+            atomic_write(ledger_path, lambda p: p.write_text(json.dumps(ledger)))
+            attempt += 1
+    if len(done) < episodes:
+        raise RuntimeError(f"Only {len(done)} successful episodes after {attempt} attempts (asked for {episodes}).")
+    return sorted(done)[:episodes]
+
+
+def build_dataset(
+    episodes: list[Path],
+    root: Path,
+    repo_id: str,
+    fps: int,
+    features: dict,
+    robot_type: str,
+    use_videos: bool,
+    frames: Callable[[np.lib.npyio.NpzFile], Iterator[dict]],
+):
+    """Write the cached episodes (`frames(npz)` yields LeRobot frames) as a LeRobotDataset at `root`."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    staging = root.with_name(root.name + ".tmp")
+    if staging.exists():
+        shutil.rmtree(staging)
+    ds = LeRobotDataset.create(
+        repo_id=repo_id, fps=fps, features=features, root=staging, robot_type=robot_type, use_videos=use_videos
+    )
+    for path in tqdm(episodes, desc="Writing LeRobotDataset", unit="episode"):
+        with np.load(path) as ep:
+            for frame in frames(ep):
+                ds.add_frame(frame)
+        ds.save_episode()
+    ds.finalize()
+    if root.exists():
+        shutil.rmtree(root)
+    staging.replace(root)
+    return LeRobotDataset(repo_id, root=root)
+
+
+def finish(ds, work: Path, push_to_hub: bool, private: bool, keep_work: bool):
+    """Push the dataset if asked and drop the episode cache (unless kept); return the dataset."""
+    if push_to_hub:
+        ds.push_to_hub(private=private)
+    if not keep_work:
+        shutil.rmtree(work)
+    return ds

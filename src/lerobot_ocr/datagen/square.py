@@ -1,0 +1,125 @@
+"""`lerobot-ocr generate square`: scripted-expert Square demonstrations as a LeRobotDataset v3.
+
+Like robomimic's Square (PH) in LeRobot form, fps 20, world frame in metres:
+`observation.state` (11,) = eef [xyz, rot6d] + gripper qpos (2); `observation.environment_state`
+(12,) = nut [xyz, rot6d] + eef - nut; `observation.object_pose` (7,) = nut [xyz, qw, qx, qy, qz];
+`action` (10,) = absolute eef target [xyz, rot6d, gripper]; with images also
+`observation.images.agentview` / `observation.images.wrist` (84x84). Only successful episodes are
+kept. Safe to interrupt and resumable (`lerobot_ocr.datagen.recording`). Needs robosuite.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from lerobot_ocr.datagen.recording import build_dataset, collect_episodes, finish, work_dir
+from lerobot_ocr.envs.configs import SQUARE_TASK as TASK
+
+FPS = 20
+ROT6D = ["r00", "r01", "r02", "r10", "r11", "r12"]
+CAMERAS = ("agentview", "wrist")
+
+
+def square_features(images: bool = False, use_videos: bool = True, size: int = 84) -> dict:
+    features = {
+        "observation.state": {"dtype": "float32", "shape": (11,), "names": ["x", "y", "z", *ROT6D, "finger_l", "finger_r"]},
+        "observation.environment_state": {
+            "dtype": "float32", "shape": (12,), "names": ["nut_x", "nut_y", "nut_z", *ROT6D, "eef_dx", "eef_dy", "eef_dz"],
+        },  # fmt: skip
+        "observation.object_pose": {"dtype": "float32", "shape": (7,), "names": ["x", "y", "z", "qw", "qx", "qy", "qz"]},
+        "action": {"dtype": "float32", "shape": (10,), "names": ["x", "y", "z", *ROT6D, "gripper"]},
+        "next.reward": {"dtype": "float32", "shape": (1,), "names": None},
+        "next.success": {"dtype": "bool", "shape": (1,), "names": None},
+        "next.done": {"dtype": "bool", "shape": (1,), "names": None},
+    }
+    if images:
+        for cam in CAMERAS:
+            features[f"observation.images.{cam}"] = {
+                "dtype": "video" if use_videos else "image", "shape": (size, size, 3), "names": ["height", "width", "channels"],
+            }  # fmt: skip
+    return features
+
+
+def record_episode(env, expert, seed: int, max_steps: int = 400) -> dict[str, np.ndarray] | None:
+    """Roll the expert out from `seed`; return the episode's arrays, or None if it failed."""
+    obs, _ = env.reset(seed=seed)
+    base = env.unwrapped
+    expert.reset(base)
+    frames: dict[str, list] = {k: [] for k in ("state", "env_state", "pose", "action", "reward", "success")}
+    images = "pixels" in obs
+    for cam in CAMERAS if images else ():
+        frames[cam] = []
+    for _ in range(max_steps):
+        action = expert.act(base)
+        frames["state"].append(obs["agent_pos"])
+        frames["env_state"].append(obs["environment_state"])
+        frames["pose"].append(obs["object_pose"])
+        for cam in CAMERAS if images else ():
+            frames[cam].append(obs["pixels"][cam])
+        frames["action"].append(action)
+        obs, reward, terminated, truncated, info = env.step(action)
+        frames["reward"].append(reward)
+        frames["success"].append(bool(info["is_success"]))
+        if info["is_success"]:
+            return {k: np.asarray(v) for k, v in frames.items()}
+        if truncated:
+            break
+    return None
+
+
+def _frames(ep) -> Iterator[dict]:
+    n = len(ep["action"])
+    for i in range(n):
+        frame = {
+            "observation.state": ep["state"][i].astype(np.float32),
+            "observation.environment_state": ep["env_state"][i].astype(np.float32),
+            "observation.object_pose": ep["pose"][i].astype(np.float32),
+            "action": ep["action"][i].astype(np.float32),
+            "next.reward": np.array([ep["reward"][i]], dtype=np.float32),
+            "next.success": np.array([ep["success"][i]], dtype=bool),
+            "next.done": np.array([i == n - 1], dtype=bool),
+            "task": TASK,
+        }
+        for cam in CAMERAS:
+            if cam in ep:
+                frame[f"observation.images.{cam}"] = ep[cam][i]
+        yield frame
+
+
+def generate_square(
+    root: str | Path,
+    episodes: int = 200,
+    region: str = "id",
+    repo_id: str = "local/square_ocr",
+    seed: int = 0,
+    images: bool = True,
+    use_videos: bool = True,
+    push_to_hub: bool = False,
+    private: bool = False,
+    keep_work: bool = False,
+    max_attempts: int | None = None,
+):
+    """Generate `episodes` successful expert demonstrations with the nut starting in `region`.
+
+    Attempt j uses env seed `seed + j`; failed attempts are skipped. `images=False` records the
+    low-dim observations only (no cameras rendered: several times faster).
+    """
+    from lerobot_ocr.envs.square_env import make_square_ocr_env
+    from lerobot_ocr.experts.square_expert import SquareExpert
+
+    root = Path(root)
+    work = work_dir(root)
+    obs_type = "pixels_agent_pos" if images else "environment_state_agent_pos"
+    env = make_square_ocr_env(obs_type=obs_type, region=region, render_mode=None)
+    expert = SquareExpert(seed=seed)
+    paths = collect_episodes(
+        work, {"region": region, "seed": seed, "images": images}, episodes, seed,
+        lambda s: record_episode(env, expert, s), desc=f"Square expert demos ({region})", max_attempts=max_attempts,
+    )  # fmt: skip
+    env.close()
+    features = square_features(images, use_videos)
+    ds = build_dataset(paths, root, repo_id, FPS, features, "panda", use_videos and images, _frames)
+    return finish(ds, work, push_to_hub, private, keep_work)

@@ -19,13 +19,13 @@ TINY_OCR = {
 }
 
 
-def save_base_checkpoint(policy_cfg, ds_meta, out: Path) -> Path:
+def save_base_checkpoint(policy_cfg, ds_meta, out: Path, inputs=("observation.image", "observation.state")) -> Path:
     """Save an untrained policy + its processors as a `pretrained_model` folder (what lerobot-train writes)."""
     from lerobot.policies.factory import get_policy_class, make_pre_post_processors
     from lerobot.utils.feature_utils import dataset_to_policy_features
 
     feats = dataset_to_policy_features(ds_meta.features)
-    policy_cfg.input_features = {k: feats[k] for k in ("observation.image", "observation.state")}
+    policy_cfg.input_features = {k: feats[k] for k in inputs}
     policy_cfg.output_features = {"action": feats["action"]}
     policy = get_policy_class(policy_cfg.type)(policy_cfg)
     pre, post = make_pre_post_processors(policy_cfg, dataset_stats=ds_meta.stats)

@@ -36,8 +36,8 @@ LOWDIM_NORM = '{"VISUAL": "MEAN_STD", "STATE": "MIN_MAX", "ENV": "MIN_MAX", "ACT
 
 PROFILES = {
     "quick": {
-        "demos": 20, "base": "lowdim", "base_steps": 1500, "base_batch": 64, "base_dims": "[64,128,256]",
-        "ocr_steps": 1500, "ocr_batch": 64, "ocr_dims": "[64,128,256]", "episodes": 10, "eval_batch": 10,
+        "demos": 30, "base": "lowdim", "base_steps": 5000, "base_batch": 64, "base_dims": "[64,128,256]",
+        "ocr_steps": 2000, "ocr_batch": 64, "ocr_dims": "[64,128,256]", "episodes": 10, "eval_batch": 10,
         "device": "cpu",
     },
     "cpu": {

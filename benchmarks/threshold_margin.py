@@ -77,7 +77,7 @@ def main() -> None:
     update_section(
         "Switch threshold margin",
         f"""
-Manifold of `{result['checkpoint']}` (Push-T quick profile: 20 ID demos); threshold = 2% quantile of the
+Manifold of `{result['checkpoint']}` (the Push-T quick profile's; its demo count is in the "Push-T (quick)" section); threshold = 2% quantile of the
 training frames' scores ({calibrated:.2f}, mean log density) minus the margin. {args.starts} fresh starts per
 region (`pusht_ocr` seeds 200000+i). Start frames are the rarest frames of a demo set, so the plain quantile
 flags many unseen ID starts; the default `--policy.threshold_margin` is 2 nats.

@@ -23,7 +23,7 @@ class SquareExpertConfig:
     turn: float = 0.08  # rad per step
     hover: float = 0.08  # m above the handle before descending
     grasp_depth: float = 0.0  # grip-site height relative to the handle site when closing
-    carry_z: float = 1.02  # eef height while carrying (peg top ~0.95)
+    carry_z: float = 1.06  # eef height while carrying (peg top 0.95; the nut hangs below the grasp and swings)
     release_nut_z: float = 0.88  # nut height at which the gripper opens over the peg
     close_steps: int = 10
     open_steps: int = 8
@@ -31,6 +31,7 @@ class SquareExpertConfig:
     tolerance: float = 0.006  # m: phase goal reached
     align_tolerance: float = 0.006  # m: nut centre over the peg before lowering
     feedback_gain: float = 0.3  # fraction of the nut-peg error added to the target per step
+    max_correction: float = 0.04  # m: bound on the feedback's correction (no wind-up if the nut is lost)
     wrist_limit: float = 1.8  # rad: keep the last joint (±2.90 on a Panda) away from its stops
     jitter: float = 0.004  # m: per-episode noise on the waypoints (demo diversity)
 
@@ -156,7 +157,12 @@ class SquareExpert:
             # integral feedback on the nut's centre (absorbs the arm's sag under load); a gain < 1
             # keeps a swinging nut from winding it up
             goal_xy = self.target_pos[:2] + cfg.feedback_gain * (peg[:2] - nut[:2])
-            if phase == "carry":
+            nominal = peg[:2] + (eef[:2] - nut[:2])  # where the eef goes without sag
+            excess = goal_xy - nominal
+            goal_xy = nominal + excess * min(1.0, cfg.max_correction / max(np.linalg.norm(excess), 1e-9))
+            if nut[2] < eef[2] - 0.06:  # the nut slipped out of the gripper: grasp it again
+                self.phase, self.counter = "regrasp", 0
+            elif phase == "carry":
                 turned = self._move(np.array([*goal_xy, cfg.carry_z + self.noise[3, 2]]), self.carry_rot)
                 aligned = turned and np.linalg.norm(peg[:2] - nut[:2]) < cfg.align_tolerance
                 self.counter = self.counter + 1 if aligned else 0

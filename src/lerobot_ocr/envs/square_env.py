@@ -141,7 +141,6 @@ class SquareOcrEnv(gym.Env):
         self.observation_size = observation_size
         self._pixels = obs_type == "pixels_agent_pos"
         self._sim_env = None  # created on first reset (in the vector-env worker)
-        self._np_random_seed = None
         spaces_ = {
             "agent_pos": spaces.Box(-np.inf, np.inf, (11,), dtype=np.float64),
             "environment_state": spaces.Box(-np.inf, np.inf, (12,), dtype=np.float64),
@@ -249,7 +248,6 @@ class SquareOcrEnv(gym.Env):
         env.sim.data.set_joint_qpos(joint, qpos)
         env.sim.data.set_joint_qvel(joint, np.zeros(6))
         env.sim.forward()
-        self._last_gripper = -1.0
         return self._observation(), {"start_region": label, "is_success": False}
 
     def step(self, action):

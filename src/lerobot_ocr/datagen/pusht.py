@@ -14,8 +14,16 @@ from pathlib import Path
 
 import numpy as np
 
-from lerobot_ocr.datagen.recording import build_dataset, collect_episodes, finish, work_dir
+from lerobot_ocr.datagen.recording import (
+    build_dataset,
+    collect_episodes,
+    episode_arrays,
+    episode_frames,
+    finish,
+    work_dir,
+)
 from lerobot_ocr.envs.configs import PUSHT_TASK as TASK
+from lerobot_ocr.experts.rollout import rollout
 
 FPS = 10
 
@@ -37,45 +45,24 @@ def pusht_features(use_videos: bool = True) -> dict:
     }
 
 
-def record_episode(env, expert, seed: int, max_steps: int = 300) -> dict[str, np.ndarray] | None:
-    """Roll the expert out from `seed`; return the episode's arrays, or None if it failed."""
+def _observe(obs: dict, env) -> dict:
     from gym_pusht.envs.pusht import PushTEnv
 
-    obs, _ = env.reset(seed=seed)
-    base = env.unwrapped
-    expert.reset()
-    frames: dict[str, list] = {k: [] for k in ("image", "state", "env_state", "pose", "action", "reward", "success")}
-    for _ in range(max_steps):
-        action = expert.act(base)
-        frames["image"].append(obs["pixels"])
-        frames["state"].append(obs["agent_pos"])
-        frames["env_state"].append(PushTEnv.get_keypoints(base._block_shapes).flatten())
-        frames["pose"].append(obs["object_pose"])
-        frames["action"].append(action)
-        obs, reward, terminated, truncated, info = env.step(action)
-        frames["reward"].append(reward)
-        frames["success"].append(bool(info["is_success"]))
-        if info["is_success"]:
-            return {k: np.asarray(v) for k, v in frames.items()}
-        if truncated:
-            break
-    return None
+    return {
+        "image": obs["pixels"],
+        "state": obs["agent_pos"],
+        "env_state": PushTEnv.get_keypoints(env._block_shapes).flatten(),
+        "pose": obs["object_pose"],
+    }
+
+
+def record_episode(env, expert, seed: int, max_steps: int = 300) -> dict[str, np.ndarray] | None:
+    """Roll the expert out from `seed`; return the episode's arrays, or None if it failed."""
+    return episode_arrays(rollout(env, expert, seed, max_steps, record=_observe))
 
 
 def _frames(ep) -> Iterator[dict]:
-    n = len(ep["action"])
-    for i in range(n):
-        yield {
-            "observation.image": ep["image"][i],
-            "observation.state": ep["state"][i].astype(np.float32),
-            "observation.environment_state": ep["env_state"][i].astype(np.float32),
-            "observation.object_pose": ep["pose"][i].astype(np.float32),
-            "action": ep["action"][i].astype(np.float32),
-            "next.reward": np.array([ep["reward"][i]], dtype=np.float32),
-            "next.success": np.array([ep["success"][i]], dtype=bool),
-            "next.done": np.array([i == n - 1], dtype=bool),
-            "task": TASK,
-        }
+    return episode_frames(ep, TASK, {"observation.image": "image"})
 
 
 def generate_pusht(

@@ -72,6 +72,34 @@ def collect_episodes(
     return sorted(done)[:episodes]
 
 
+def episode_arrays(result: dict) -> dict[str, np.ndarray] | None:
+    """A `lerobot_ocr.experts.rollout` result -> one array per step field, or None if it failed."""
+    if not result["success"]:
+        return None
+    return {key: np.asarray([step[key] for step in result["steps"]]) for key in result["steps"][0]}
+
+
+def episode_frames(ep, task: str, images: dict[str, str]) -> Iterator[dict]:
+    """LeRobot frames of a cached episode (keys state, env_state, pose, action, reward, success) plus
+    the image features `images` = {feature name: episode key} the episode holds."""
+    n = len(ep["action"])
+    images = {feature: key for feature, key in images.items() if key in ep}
+    for i in range(n):
+        frame = {
+            "observation.state": ep["state"][i].astype(np.float32),
+            "observation.environment_state": ep["env_state"][i].astype(np.float32),
+            "observation.object_pose": ep["pose"][i].astype(np.float32),
+            "action": ep["action"][i].astype(np.float32),
+            "next.reward": np.array([ep["reward"][i]], dtype=np.float32),
+            "next.success": np.array([ep["success"][i]], dtype=bool),
+            "next.done": np.array([i == n - 1], dtype=bool),
+            "task": task,
+        }
+        for feature, key in images.items():
+            frame[feature] = ep[key][i]
+        yield frame
+
+
 def build_dataset(
     episodes: list[Path],
     root: Path,

@@ -15,8 +15,16 @@ from pathlib import Path
 
 import numpy as np
 
-from lerobot_ocr.datagen.recording import build_dataset, collect_episodes, finish, work_dir
+from lerobot_ocr.datagen.recording import (
+    build_dataset,
+    collect_episodes,
+    episode_arrays,
+    episode_frames,
+    finish,
+    work_dir,
+)
 from lerobot_ocr.envs.configs import SQUARE_TASK as TASK
+from lerobot_ocr.experts.rollout import rollout
 
 FPS = 20
 ROT6D = ["r00", "r01", "r02", "r10", "r11", "r12"]
@@ -43,50 +51,18 @@ def square_features(images: bool = False, use_videos: bool = True, size: int = 8
     return features
 
 
+def _observe(obs: dict, env) -> dict:
+    kept = {"state": obs["agent_pos"], "env_state": obs["environment_state"], "pose": obs["object_pose"]}
+    return {**kept, **obs.get("pixels", {})}  # camera images under their names (CAMERAS)
+
+
 def record_episode(env, expert, seed: int, max_steps: int = 400) -> dict[str, np.ndarray] | None:
     """Roll the expert out from `seed`; return the episode's arrays, or None if it failed."""
-    obs, _ = env.reset(seed=seed)
-    base = env.unwrapped
-    expert.reset(base)
-    frames: dict[str, list] = {k: [] for k in ("state", "env_state", "pose", "action", "reward", "success")}
-    images = "pixels" in obs
-    for cam in CAMERAS if images else ():
-        frames[cam] = []
-    for _ in range(max_steps):
-        action = expert.act(base)
-        frames["state"].append(obs["agent_pos"])
-        frames["env_state"].append(obs["environment_state"])
-        frames["pose"].append(obs["object_pose"])
-        for cam in CAMERAS if images else ():
-            frames[cam].append(obs["pixels"][cam])
-        frames["action"].append(action)
-        obs, reward, terminated, truncated, info = env.step(action)
-        frames["reward"].append(reward)
-        frames["success"].append(bool(info["is_success"]))
-        if info["is_success"]:
-            return {k: np.asarray(v) for k, v in frames.items()}
-        if truncated:
-            break
-    return None
+    return episode_arrays(rollout(env, expert, seed, max_steps, record=_observe))
 
 
 def _frames(ep) -> Iterator[dict]:
-    n = len(ep["action"])
-    for i in range(n):
-        frame = {
-            "observation.state": ep["state"][i].astype(np.float32),
-            "observation.environment_state": ep["env_state"][i].astype(np.float32),
-            "observation.object_pose": ep["pose"][i].astype(np.float32),
-            "action": ep["action"][i].astype(np.float32),
-            "next.reward": np.array([ep["reward"][i]], dtype=np.float32),
-            "next.success": np.array([ep["success"][i]], dtype=bool),
-            "next.done": np.array([i == n - 1], dtype=bool),
-            "task": TASK,
-        }
-        for cam in CAMERAS:
-            if cam in ep:
-                frame[f"observation.images.{cam}"] = ep[cam][i]
-        yield frame
+    return episode_frames(ep, TASK, {f"observation.images.{cam}": cam for cam in CAMERAS})
 
 
 def generate_square(

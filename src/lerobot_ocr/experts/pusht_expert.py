@@ -18,6 +18,7 @@ from gym_pusht.envs.pusht import PushTEnv
 from pymunk.vec2d import Vec2d
 
 from lerobot_ocr.envs.pusht_env import block_keypoints
+from lerobot_ocr.experts.rollout import rollout
 
 GOAL_POSE = np.array([256.0, 256.0, np.pi / 4])
 AGENT_RADIUS = 15.0
@@ -98,7 +99,8 @@ class PushTExpert:
         self.contacts, self.normals = _contacts(self.cfg.contact_spacing)
         self.plan: list[np.ndarray] = []
 
-    def reset(self) -> None:
+    def reset(self, env: PushTEnv | None = None) -> None:
+        """Forget the current plan (call after each env reset; `env` is unused, for the common rollout)."""
         self.plan = []
 
     # ----------------------------------------------------------------------- physics model
@@ -253,21 +255,5 @@ class PushTExpert:
 
 
 def run_expert_episode(env, seed: int, expert: PushTExpert | None = None, max_steps: int = 300) -> dict:
-    """Roll the expert out on a (wrapped) Push-T env from `seed`; return frames' data and success."""
-    expert = expert or PushTExpert(seed=seed)
-    expert.reset()
-    obs, info = env.reset(seed=seed)
-    base = env.unwrapped
-    steps = []
-    success = False
-    for _ in range(max_steps):
-        action = expert.act(base)
-        next_obs, reward, terminated, truncated, info = env.step(action)
-        steps.append({"obs": obs, "action": action, "reward": reward, "success": bool(info["is_success"])})
-        obs = next_obs
-        if info["is_success"]:
-            success = True
-            break
-        if truncated:
-            break
-    return {"steps": steps, "success": success, "length": len(steps)}
+    """Roll the expert out on a (wrapped) Push-T env from `seed` (`lerobot_ocr.experts.rollout`)."""
+    return rollout(env, expert or PushTExpert(seed=seed), seed, max_steps)

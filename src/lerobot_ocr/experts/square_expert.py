@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lerobot_ocr.envs.square_env import SquareOcrEnv, pose_to_action
+from lerobot_ocr.experts.rollout import rollout
 from lerobot_ocr.geometry.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 
 
@@ -195,21 +196,5 @@ class SquareExpert:
 
 
 def run_square_expert_episode(env, seed: int, expert: SquareExpert | None = None, max_steps: int = 400) -> dict:
-    """Roll the expert out on a (wrapped) Square env from `seed`; return per-step data and success."""
-    expert = expert or SquareExpert(seed=seed)
-    obs, info = env.reset(seed=seed)
-    region = info.get("start_region")
-    base = env.unwrapped
-    expert.reset(base)
-    steps, success = [], False
-    for _ in range(max_steps):
-        action = expert.act(base)
-        next_obs, reward, terminated, truncated, info = env.step(action)
-        steps.append({"obs": obs, "action": action, "reward": reward, "success": bool(info["is_success"])})
-        obs = next_obs
-        if info["is_success"]:
-            success = True
-            break
-        if truncated:
-            break
-    return {"steps": steps, "success": success, "length": len(steps), "start_region": region}
+    """Roll the expert out on a (wrapped) Square env from `seed` (`lerobot_ocr.experts.rollout`)."""
+    return rollout(env, expert or SquareExpert(seed=seed), seed, max_steps)

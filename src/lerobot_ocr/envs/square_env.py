@@ -29,7 +29,6 @@ from gymnasium import spaces
 from lerobot_ocr.envs.configs import SQUARE_TASK
 from lerobot_ocr.geometry.rotations import (
     matrix_to_axis_angle,
-    matrix_to_quaternion,
     matrix_to_rotation_6d,
     quaternion_to_matrix,
     rotation_6d_to_matrix,
@@ -176,10 +175,11 @@ class SquareOcrEnv(gym.Env):
         return out
 
     def object_pose(self) -> np.ndarray:
-        """(7,) nut [x, y, z, qw, qx, qy, qz] in the world."""
-        pose = self.nut_pose_matrix()
-        quat = matrix_to_quaternion(pose[:3, :3], "wxyz")
-        return np.concatenate([pose[:3, 3], quat * np.sign(quat[0] + 1e-12)])
+        """(7,) nut [x, y, z, qw, qx, qy, qz] in the world (qw >= 0), read from the sim as is."""
+        data = self.sim_env.sim.data
+        body = self.sim_env.obj_body_id[self._nut.name]
+        quat = np.array(data.body_xquat[body])  # MuJoCo stores wxyz
+        return np.concatenate([data.body_xpos[body], quat * np.sign(quat[0] + 1e-12)])
 
     def handle_position(self) -> np.ndarray:
         """(3,) world position of the nut's handle (where the expert grasps)."""

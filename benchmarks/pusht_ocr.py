@@ -89,7 +89,7 @@ class Stages:
 
 
 def trainer(p: dict) -> list[str]:
-    """lerobot-train; for low-dim data its loop with in-memory items (≈ 5x faster on 2 cores, same batches)."""
+    """lerobot-train; for low-dim data its loop with in-memory items (≈ 4.6x faster on 2 cores, same batches)."""
     return [sys.executable, str(HERE / "train_in_memory.py")] if p["base"] == "lowdim" else [str(BIN / "lerobot-train")]
 
 

@@ -3,8 +3,8 @@
 Usage: python benchmarks/train_in_memory.py <lerobot-train arguments>
 
 For low-dimensional datasets only (no camera features; it refuses others). LeRobot 0.6.1 builds each
-item with several arrow `select` queries (≈ 3.5 ms per item on 2 CPU cores, i.e. ≈ 0.25 s of a
-0.35 s training step at batch 64), while the U-Net update itself takes ≈ 0.1 s. Items of a
+item with several arrow `select` queries (≈ 3.5 ms per item on 2 CPU cores: 0.25 s of a 0.32 s
+training step at batch 64, where the U-Net update takes 0.07 s; `benchmarks/train_step_time.py`). Items of a
 low-dim dataset are deterministic (no augmentation), so computing them once gives the same batches
 the plain loop would; the training loop, sampler, checkpoints and logs are lerobot-train's own.
 """

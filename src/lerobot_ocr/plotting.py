@@ -1,4 +1,4 @@
-"""Pictures: the fitted density field with recovery arrows over a 2D workspace."""
+"""Pictures: the fitted density field with recovery arrows over the workspace, frames of a rollout video."""
 
 from __future__ import annotations
 
@@ -18,17 +18,27 @@ def density_field(
     angle: float,
     extent: tuple[float, float, float, float],
     resolution: int = 64,
+    height: float = 0.0,
     **recovery_kwargs,
 ) -> dict[str, np.ndarray]:
-    """Score and recovery vector of the object translated over a grid at a fixed angle.
+    """Score and recovery vector of the object translated over a grid of world (x, y) at a fixed angle.
 
+    2D keypoints: the object at (x, y, angle). 3D keypoints: the object upright (its z axis = world
+    z), turned by `angle` about world z, its origin at (x, y, height); the arrows are the recovery
+    vector's world (x, y) part.
     Returns a dict with xs (R,), ys (R,), score (R, R) indexed [y, x], vector (R, R, 2), is_ood (R, R).
     """
     xs = np.linspace(extent[0], extent[1], resolution)
     ys = np.linspace(extent[2], extent[3], resolution)
     gx, gy = np.meshgrid(xs, ys)
-    poses = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, angle)], axis=-1)
-    kps = pose_to_keypoints(pose_to_matrix(poses, "angle"), local_keypoints)
+    transforms = pose_to_matrix(np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, angle)], axis=-1), "angle")
+    if np.asarray(local_keypoints).shape[-1] == 3:
+        upright = np.tile(np.eye(4), (gx.size, 1, 1))
+        upright[:, :2, :2] = transforms[:, :2, :2]
+        upright[:, :2, 3] = transforms[:, :2, 2]
+        upright[:, 2, 3] = height
+        transforms = upright
+    kps = pose_to_keypoints(transforms, np.asarray(local_keypoints, dtype=np.float64))
     with torch.inference_mode():
         out = manifold.recovery(torch.from_numpy(kps), **recovery_kwargs)
     shape = (resolution, resolution)
@@ -36,7 +46,7 @@ def density_field(
         "xs": xs,
         "ys": ys,
         "score": out.score.numpy().reshape(shape),
-        "vector": out.vector.numpy().reshape(*shape, 2),
+        "vector": out.vector.numpy()[..., :2].reshape(*shape, 2),
         "is_ood": out.is_ood.numpy().reshape(shape),
     }
 
@@ -51,15 +61,20 @@ def plot_density_field(
     resolution: int = 64,
     arrows: int = 16,
     title: str | None = None,
+    height: float = 0.0,
+    regions: dict[str, tuple[float, float, float, float]] | None = None,
     **recovery_kwargs,
 ) -> Path:
-    """Save a PNG: OOD score heatmap, calibrated threshold contour, recovery arrows, training data."""
+    """Save a PNG: OOD score heatmap, calibrated threshold contour, recovery arrows, training data.
+
+    `regions` draws named boxes {name: (x0, x1, y0, y1)} (e.g. the ID and OOD start regions).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    field = density_field(manifold, local_keypoints, angle, extent, resolution, **recovery_kwargs)
+    field = density_field(manifold, local_keypoints, angle, extent, resolution, height, **recovery_kwargs)
     fig, ax = plt.subplots(figsize=(6.4, 5.6), dpi=110)
     score = field["score"]
     lo = np.quantile(score, 0.05)
@@ -81,6 +96,10 @@ def plot_density_field(
     gx, gy = np.meshgrid(field["xs"][sl[1]], field["ys"][sl[0]])
     ood = field["is_ood"][sl]
     ax.quiver(gx[ood], gy[ood], unit[..., 0][ood], unit[..., 1][ood], color="orangered", scale=30, width=0.004)
+    for (name, (x0, x1, y0, y1)), color in zip((regions or {}).items(), ("deepskyblue", "magenta", "yellow")):
+        ax.add_patch(plt.Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, edgecolor=color, linewidth=1.5, label=name))
+    if regions:
+        ax.legend(loc="upper right", fontsize=8)
     ax.set_xlim(extent[0], extent[1])
     ax.set_ylim(extent[2], extent[3])
     ax.set_xlabel("object x")
@@ -89,6 +108,35 @@ def plot_density_field(
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def video_frame_strip(video: str | Path, path: str | Path, n_frames: int = 6, title: str | None = None) -> Path:
+    """Save a PNG of `n_frames` evenly spaced frames (first and last included) of a video, in one row."""
+    import av
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    with av.open(str(video)) as container:
+        fps = float(container.streams.video[0].average_rate or 1)
+        frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
+    if not frames:
+        raise ValueError(f"{video} has no frames.")
+    idx = np.unique(np.linspace(0, len(frames) - 1, n_frames).round().astype(int))
+    fig, axes = plt.subplots(1, len(idx), figsize=(2.2 * len(idx), 2.5), dpi=100, squeeze=False)
+    for ax, i in zip(axes[0], idx):
+        ax.imshow(frames[i])
+        ax.set_title(f"t = {i / fps:.1f} s", fontsize=9)
+        ax.axis("off")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
     plt.close(fig)
     return path

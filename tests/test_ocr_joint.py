@@ -133,6 +133,27 @@ def test_hysteresis_and_latch(diffusion_base, converted_dataset, id_pose):
     assert joint.ocr_stats()["in_recovery"][:, 0].tolist() == [True, False, False]  # latched on the base
 
 
+def test_fixed_delay_plans_hold_still_then_push(joint):
+    """--policy.fixed_delay replaces the distance ramp: near or far, the first frames hold still."""
+    from lerobot_ocr.geometry import pose_to_matrix
+
+    frames = pose_to_matrix(torch.tensor([OOD_POSE, OOD_POSE]), "angle")
+    kps = joint._keypoints(frames)
+    near_far = torch.tensor([[400.0, 120.0], [20.0, 480.0]])
+    planner = joint.planner
+    try:
+        joint.planner = type(planner)(**{**planner.__dict__, "fixed_delay": 12})
+        _, plan = joint.recovery_actions(frames, kps, near_far)
+    finally:
+        joint.planner = planner
+    assert torch.equal(plan[:, :13], kps[:, None].expand(-1, 13, -1, -1))
+    shift = (plan[:, -1] - plan[:, 0]).mean(-2)
+    torch.testing.assert_close(shift.norm(dim=-1), torch.full((2,), 3 * joint.config.step_size))
+    assert (shift[:, 0] < 0).all()  # toward the demos on the left
+    _, ramp = joint.recovery_actions(frames, kps, near_far)
+    assert not torch.equal(ramp[0], ramp[1])  # the default ramp does depend on the distance
+
+
 def test_bad_input_gives_clear_errors(joint, diffusion_base, converted_dataset, tmp_path):
     obs = observation([OOD_POSE])
     del obs["observation.object_pose"]

@@ -59,3 +59,15 @@ def test_recovery_planner_normalises_and_keeps_zero():
 
 def test_delay_float32_boundary_is_not_off_by_one():
     assert recovery_delay(torch.tensor([0.05], dtype=torch.float32), 0.05, 0.06, 16).item() == 0
+
+
+def test_fixed_delay_ignores_the_distance():
+    planner = RecoveryPlanner(horizon=8, step_size=2.0, d_min=10.0, d_max=50.0, fixed_delay=5)
+    kps = torch.zeros(2, 3, 2)
+    vec = torch.tensor([[1.0, 0.0], [0.0, 1.0]])
+    traj = planner(kps, vec, distance=torch.tensor([0.0, 100.0]))  # near and far: the same schedule
+    assert (traj[:, :6] == 0).all()  # frames 0..5 hold still (t - 5 <= 0)
+    torch.testing.assert_close(traj[0, -1, 0], torch.tensor([4.0, 0.0]))  # 2 moving frames x 2
+    torch.testing.assert_close(traj[1, -1, 0], torch.tensor([0.0, 4.0]))
+    with pytest.raises(ValueError, match="fixed_delay"):
+        RecoveryPlanner(horizon=8, fixed_delay=8)

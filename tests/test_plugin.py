@@ -70,3 +70,17 @@ def test_pusht_config_file_parses_with_cli_overrides():
     assert cfg.policy.type == "ocr_joint" and cfg.policy.base_path == "/b"
     assert cfg.policy.down_dims == (64, 128, 256) and cfg.policy.object_keypoints == "pusht_t"
     assert cfg.batch_size == 256 and cfg.dataset.repo_id == "you/pusht_ocr"
+
+
+def test_config_rejects_bad_recovery_settings():
+    import pytest
+
+    from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
+
+    assert OcrJointConfig(device="cpu", fixed_delay=12).fixed_delay == 12
+    with pytest.raises(ValueError, match="fixed_delay must be in"):
+        OcrJointConfig(device="cpu", fixed_delay=16)
+    with pytest.raises(ValueError, match="n_recovery_action_steps must be in"):
+        OcrJointConfig(device="cpu", n_recovery_action_steps=17)
+    with pytest.raises(ValueError, match="Need d_max > d_min"):
+        OcrJointConfig(device="cpu", d_min=5.0, d_max=5.0)

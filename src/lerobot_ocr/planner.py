@@ -81,6 +81,9 @@ class RecoveryPlanner:
 
     normalize: scale the recovery vector to unit length first, so `step_size` is the distance the
     keypoints move per frame (the reference code does this for Push-T). Zero vectors stay zero.
+    fixed_delay: hold the keypoints still for this many frames whatever the distance, instead of
+    the d_min/d_max ramp (the reference's Push-T eval: 12 of 16, so the robot first gets round
+    the object and the plan asks for a short push).
     """
 
     horizon: int = 16
@@ -88,6 +91,11 @@ class RecoveryPlanner:
     d_min: float = 0.0
     d_max: float = 1.0
     normalize: bool = True
+    fixed_delay: int | None = None
+
+    def __post_init__(self):
+        if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:
+            raise ValueError(f"fixed_delay must be in [0, horizon={self.horizon}), got {self.fixed_delay}.")
 
     def __call__(self, keypoints: torch.Tensor, recovery_vector: torch.Tensor, distance: torch.Tensor) -> torch.Tensor:
         """(B, K, D) keypoints, (B, D) or (B, K, D) recovery vectors, (B,) distances -> (B, L, K, D)."""
@@ -95,5 +103,8 @@ class RecoveryPlanner:
         if self.normalize:
             norm = torch.linalg.vector_norm(vec, dim=-1, keepdim=True)
             vec = vec / norm.clamp_min(torch.finfo(vec.dtype).tiny)
-        delay = recovery_delay(distance, self.d_min, self.d_max, self.horizon)
+        if self.fixed_delay is None:
+            delay = recovery_delay(distance, self.d_min, self.d_max, self.horizon)
+        else:
+            delay = torch.full((keypoints.shape[0],), self.fixed_delay, dtype=torch.long, device=keypoints.device)
         return plan_keypoint_trajectory(keypoints, vec, self.step_size, self.horizon, delay)

@@ -53,6 +53,8 @@ class OcrJointConfig(PreTrainedConfig):
     Recovery
         magnitude: recovery vector magnitude, "log_deficit" (ours) or "paper" (q(|grad p|)).
         step_size (alpha, object units per frame), horizon (L), d_min / d_max (delay ramp),
+        fixed_delay: frames the planned keypoints hold still whatever the distance (replaces the
+            ramp; the reference's Push-T eval uses 12 of 16 and executes all 16 actions),
         n_recovery_action_steps: actions executed per recovery chunk before re-deciding.
     Inverse policy: LeRobot's diffusion U-Net (`down_dims`, ...), DDIM with
         `num_inference_steps` steps by default.
@@ -88,6 +90,7 @@ class OcrJointConfig(PreTrainedConfig):
     horizon: int = 16
     d_min: float = 15.0
     d_max: float = 60.0
+    fixed_delay: int | None = None
     n_recovery_action_steps: int = 8
 
     # Keypoint inverse policy (LeRobot's diffusion U-Net).
@@ -141,6 +144,8 @@ class OcrJointConfig(PreTrainedConfig):
             raise ValueError(f"--policy.n_recovery_action_steps must be in [1, horizon={self.horizon}].")
         if not self.d_max > self.d_min:
             raise ValueError(f"Need d_max > d_min, got d_min={self.d_min}, d_max={self.d_max}.")
+        if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:
+            raise ValueError(f"--policy.fixed_delay must be in [0, horizon={self.horizon}) or None, got {self.fixed_delay}.")
         if self.hysteresis < 0:
             raise ValueError(f"--policy.hysteresis must be >= 0, got {self.hysteresis}.")
 

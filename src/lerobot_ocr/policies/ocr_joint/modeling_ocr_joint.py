@@ -112,8 +112,9 @@ class OcrJointPolicy(PreTrainedPolicy):
             clip_sample=config.clip_sample,
         )  # fmt: skip
         self.planner = RecoveryPlanner(
-            horizon=config.horizon, step_size=config.step_size, d_min=config.d_min, d_max=config.d_max, normalize=True
-        )
+            horizon=config.horizon, step_size=config.step_size, d_min=config.d_min, d_max=config.d_max, normalize=True,
+            fixed_delay=config.fixed_delay,
+        )  # fmt: skip
 
         bundled = Path(bundle_dir) / BASE_DIR if bundle_dir is not None else None
         if bundled is not None and bundled.is_dir():

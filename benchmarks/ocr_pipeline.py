@@ -51,6 +51,7 @@ class Task:
     image_feature: str  # the demos' camera feature(s) prefix, dropped for a low-dim base
     lowdim_description: str
     image_args: tuple[str, ...] = ()  # extra base training args for an image base
+    eval_overrides: tuple[str, ...] = ()  # extra lerobot-eval args of every cell (the paper's protocol)
     pictures: Callable[[Path, Path, dict, dict, Path], list[Path]] | None = None
 
     def generate_args(self, p: dict, root: Path) -> list[str]:
@@ -123,7 +124,7 @@ def eval_args(task: Task, policy: Path, region: str, p: dict, out: Path) -> list
         f"--env.obs_type={obs}", f"--eval.n_episodes={p['episodes']}", f"--eval.batch_size={p['eval_batch']}",
         f"--policy.device={p['device']}", f"--seed={EVAL_SEED}", f"--output_dir={out}",
         # CPU: one process; async workers would each spend ~10 s importing LeRobot on a 2-core machine.
-        f"--eval.use_async_envs={'true' if p['device'] != 'cpu' else 'false'}",
+        f"--eval.use_async_envs={'true' if p['device'] != 'cpu' else 'false'}", *task.eval_overrides,
     ]  # fmt: skip
 
 
@@ -236,7 +237,7 @@ def main(task: Task) -> None:
             f"--dataset.repo_id={ocr_repo}", f"--dataset.root={converted}", f"--policy.base_path={base_ckpt}",
             f"--policy.device={p['device']}", f"--policy.down_dims={p['ocr_dims']}", f"--steps={p['ocr_steps']}",
             f"--batch_size={p['ocr_batch']}", "--num_workers=0", f"--save_freq={p['ocr_steps']}", "--log_freq=500",
-            "--seed=1000", f"--output_dir={ocr_out}", *p.get("ocr_args", "").split(),
+            "--seed=1000", f"--output_dir={ocr_out}",
         ], logs / "ocr_train.log")  # fmt: skip
 
     stage("ocr_train", train_ocr)
@@ -290,7 +291,7 @@ def main(task: Task) -> None:
         f"""
 {p['demos']} scripted ID demos; {base_kind}, diffusion U-Net {p['base_dims']}, {p['base_steps']} steps at batch
 {p['base_batch']}; ocr_joint inverse policy {p['ocr_dims']}, {p['ocr_steps']} steps at batch {p['ocr_batch']}
-(configs/policy/{task.policy_config} otherwise{(', ' + p['ocr_args']) if p.get('ocr_args') else ''}); {p['episodes']} episodes per cell, env seeds {EVAL_SEED}+i, device {p['device']}.{overrides}
+(configs/policy/{task.policy_config} otherwise); {p['episodes']} episodes per cell, env seeds {EVAL_SEED}+i, device {p['device']}{(', eval ' + ' '.join(task.eval_overrides)) if task.eval_overrides else ''}.{overrides}
 {task.paper}
 
 {table}

@@ -62,6 +62,7 @@ TASK = Task(
     paper="Paper (image base, 100 demos): base ID 0.90, base OOD 0.10, joint OOD 0.93.",
     lowdim_description="low-dim base (agent xy + 8 T corners)", image_args=("--policy.crop_shape=[84,84]",),
     pictures=pictures,
+    eval_overrides=("--env.episode_length=400",),  # the reference's eval.py sets max_steps=400 (env default: 300, as LeRobot's pusht)
 )  # fmt: skip
 
 

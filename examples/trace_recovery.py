@@ -4,7 +4,7 @@
         --env.type=square_ocr --env.region=ood --eval.n_episodes=1 --eval.batch_size=1 --output_dir=/tmp/trace
 
 Per chunk (first row of the batch): object position (world), end-effector position (the state's
-first D numbers), their distance, the planner's delay (frames the plan holds still), the OOD score,
+first D numbers), their distance, the plan's still frames (frame 0 + the delay), the OOD score,
 the plan's mean keypoint shift, the first and last planned end-effector targets, and the last
 action dimension (a gripper command where there is one).
 """
@@ -29,7 +29,7 @@ def main(args: list[str]) -> None:
         still = (plan[0] - plan[0, :1]).norm(dim=-1).mean(-1) <= 1e-9
         row = {
             "object": frames[0, :d, d], "ee": state[0, :d], "dist": self._distance(state, keypoints)[0],
-            "delay": int(still.sum()), "score": self.manifold.score(keypoints[:1].double())[0],
+            "still_frames": int(still.sum()), "score": self.manifold.score(keypoints[:1].double())[0],
             "plan_shift": (plan[0, -1] - plan[0, 0]).mean(0), "target_first": actions[0, 0, :d],
             "target_last": actions[0, -1, :d], "last_dim": actions[0, :, -1],
         }  # fmt: skip

@@ -50,6 +50,7 @@ class Task:
     paper: str  # one line: the paper's numbers
     image_feature: str  # the demos' camera feature(s) prefix, dropped for a low-dim base
     lowdim_description: str
+    lowdim_generate_args: tuple[str, ...] = ()  # `lerobot-ocr generate` flags that skip the cameras
     image_args: tuple[str, ...] = ()  # extra base training args for an image base
     eval_overrides: tuple[str, ...] = ()  # extra lerobot-eval args of every cell (the paper's protocol)
     pictures: Callable[[Path, Path, dict, dict, Path], list[Path]] | None = None
@@ -57,9 +58,7 @@ class Task:
     def generate_args(self, p: dict, root: Path) -> list[str]:
         args = [str(BIN / "lerobot-ocr"), "generate", self.name, "--region", "id", "--episodes", str(p["demos"]),
                 "--root", str(root), "--repo-id", f"local/{self.name}_demos", "--seed", "0"]  # fmt: skip
-        if p["base"] == "lowdim":
-            args.append("--no-videos" if self.name == "pusht" else "--no-images")
-        return args
+        return args + list(self.lowdim_generate_args if p["base"] == "lowdim" else ())
 
 
 def run(cmd: list[str], log: Path) -> None:

@@ -58,7 +58,7 @@ def pictures(ocr_ckpt: Path, converted: Path, results: dict, eval_dirs: dict, ou
 
 TASK = Task(
     name="pusht", title="Push-T", env_type="pusht_ocr", policy_config="ocr_joint_pusht.json", object_spec="pusht_t",
-    pose_rotation=None, profiles=PROFILES, image_feature="observation.image",
+    pose_rotation=None, profiles=PROFILES, lowdim_generate_args=("--no-videos",), image_feature="observation.image",
     paper="Paper (image base, 100 demos): base ID 0.90, base OOD 0.10, joint OOD 0.93.",
     lowdim_description="low-dim base (agent xy + 8 T corners)", image_args=("--policy.crop_shape=[84,84]",),
     pictures=pictures,

@@ -63,7 +63,7 @@ def pictures(ocr_ckpt: Path, converted: Path, results: dict, eval_dirs: dict, ou
 
 TASK = Task(
     name="square", title="Square", env_type="square_ocr", policy_config="ocr_joint_square.json",
-    object_spec="axes:0.05", pose_rotation="quat_wxyz", profiles=PROFILES, image_feature="observation.images",
+    object_spec="axes:0.05", pose_rotation="quat_wxyz", profiles=PROFILES, lowdim_generate_args=("--no-images",), image_feature="observation.images",
     paper="Paper (low-dim base, 200 demos): base ID 0.87, base OOD 0.00, joint OOD 0.80.",
     lowdim_description="low-dim base (eef xyz + rot6d + fingers, nut xyz + rot6d + eef-nut)", pictures=pictures,
 )  # fmt: skip

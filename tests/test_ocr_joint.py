@@ -88,6 +88,37 @@ def test_switch_is_decided_per_row(joint, id_pose, monkeypatch):
     assert stats["recovery_fraction"] == [0.0, 1.0, 0.0] and stats["recovery_chunks"] == 1
 
 
+def test_recovery_actions_are_held_for_the_repeat(diffusion_base, converted_dataset, monkeypatch):
+    """--policy.recovery_action_repeat=3: each of the 2 executed actions is held 3 steps, then a new chunk."""
+    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=2, recovery_action_repeat=3)
+    chunks = iter(torch.arange(2 * TINY_OCR["horizon"] * 2, dtype=torch.float32).reshape(2, 1, -1, 2))
+    monkeypatch.setattr(joint.inverse, "sample", lambda plan, state, frames, noise=None: next(chunks))
+    joint.reset()
+    actions = [joint.select_action(observation([OOD_POSE]))[0, 0].item() for _ in range(7)]
+    first, second = 0.0, 2 * TINY_OCR["horizon"]  # action 0 of each chunk (x of its first row)
+    assert actions == [first] * 3 + [first + 2] * 3 + [second]
+    assert joint.ocr_stats()["recovery_chunks"] == 2
+
+
+def test_delay_countdown_counts_chunks_per_recovery(diffusion_base, converted_dataset, id_pose):
+    """The planner gets, per row, the chunks already executed since the row entered recovery."""
+    joint = make_joint(
+        diffusion_base, converted_dataset, n_recovery_action_steps=1, check_every_step=True, delay_countdown=8
+    )
+    seen, planner = [], joint.planner
+    joint.planner = lambda kps, vec, dist, chunks=None: seen.append(chunks.tolist()) or planner(kps, vec, dist, chunks)
+    joint.reset()
+    far = [[20.0, 480.0]]  # the agent far from the T: the ramp alone would hold the plan still
+    for pose in (OOD_POSE, OOD_POSE, OOD_POSE, id_pose, OOD_POSE):
+        joint.select_action(observation([pose], far))
+    assert seen == [[0], [1], [2], [0]]  # a new recovery starts counting again
+    kps = joint._keypoints(joint._pose_matrix(torch.tensor([OOD_POSE])))
+    vec = torch.tensor([[-1.0, 0.0]])
+    still = planner(kps, vec, torch.tensor([1000.0]), torch.tensor([0]))
+    pushed = planner(kps, vec, torch.tensor([1000.0]), torch.tensor([2]))  # cap 16 - 16 = 0 frames still
+    assert torch.equal(still[0, -1], kps[0]) and not torch.equal(pushed[0, 1], kps[0])
+
+
 def test_base_history_stays_right_through_a_recovery(diffusion_base, converted_dataset, id_pose):
     joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=1, check_every_step=True)
     joint.reset()

@@ -71,3 +71,19 @@ def test_fixed_delay_ignores_the_distance():
     torch.testing.assert_close(traj[1, -1, 0], torch.tensor([0.0, 4.0]))
     with pytest.raises(ValueError, match="fixed_delay"):
         RecoveryPlanner(horizon=8, fixed_delay=8)
+
+
+def test_delay_countdown_caps_the_delay_per_chunk():
+    """Far away the ramp holds still (delay L); the countdown caps it at L - 3 * chunks, never below 0."""
+    planner = RecoveryPlanner(horizon=8, step_size=1.0, d_min=10.0, d_max=50.0, delay_countdown=3)
+    kps = torch.zeros(4, 1, 2)
+    vec = torch.tensor([[1.0, 0.0]]).expand(4, -1)
+    far = torch.full((4,), 100.0)
+    traj = planner(kps, vec, far, chunks=torch.tensor([0, 1, 2, 5]))
+    moved = traj[:, -1, 0, 0]  # frames that move = L - 1 - delay
+    assert moved.tolist() == [0.0, 2.0, 5.0, 7.0]  # delays 8, 5, 2, 0
+    near = planner(kps, vec, torch.zeros(4), chunks=torch.tensor([0, 1, 2, 5]))
+    assert (near[:, -1, 0, 0] == 7.0).all()  # the ramp's own delay (0) is already below every cap
+    torch.testing.assert_close(planner(kps, vec, far), traj[[0]].expand(4, -1, -1, -1))  # no chunks: no cap
+    with pytest.raises(ValueError, match="delay_countdown"):
+        RecoveryPlanner(horizon=8, delay_countdown=-1)

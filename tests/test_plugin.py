@@ -84,3 +84,7 @@ def test_config_rejects_bad_recovery_settings():
         OcrJointConfig(device="cpu", n_recovery_action_steps=17)
     with pytest.raises(ValueError, match="Need d_max > d_min"):
         OcrJointConfig(device="cpu", d_min=5.0, d_max=5.0)
+    with pytest.raises(ValueError, match="recovery_action_repeat must be >= 1"):
+        OcrJointConfig(device="cpu", recovery_action_repeat=0)
+    with pytest.raises(ValueError, match="delay_countdown must be >= 0"):
+        OcrJointConfig(device="cpu", delay_countdown=-1)

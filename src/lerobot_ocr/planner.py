@@ -84,6 +84,10 @@ class RecoveryPlanner:
     fixed_delay: hold the keypoints still for this many frames whatever the distance, instead of
     the d_min/d_max ramp (the reference's Push-T eval: 12 of 16, so the robot first gets round
     the object and the plan asks for a short push).
+    delay_countdown: frames the delay may be at most shrinks by per chunk already planned in this
+    recovery (`chunks`): delay = min(delay, max(0, L - delay_countdown * chunks)). 0 = off. It
+    breaks stalls where the robot hovers at a distance that keeps the plan still (the reference's
+    Square eval counts the delay down 16 -> 0, one frame per call, whatever the distance).
     """
 
     horizon: int = 16
@@ -92,13 +96,26 @@ class RecoveryPlanner:
     d_max: float = 1.0
     normalize: bool = True
     fixed_delay: int | None = None
+    delay_countdown: int = 0
 
     def __post_init__(self):
         if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:
             raise ValueError(f"fixed_delay must be in [0, horizon={self.horizon}), got {self.fixed_delay}.")
+        if self.delay_countdown < 0:
+            raise ValueError(f"delay_countdown must be >= 0, got {self.delay_countdown}.")
 
-    def __call__(self, keypoints: torch.Tensor, recovery_vector: torch.Tensor, distance: torch.Tensor) -> torch.Tensor:
-        """(B, K, D) keypoints, (B, D) or (B, K, D) recovery vectors, (B,) distances -> (B, L, K, D)."""
+    def __call__(
+        self,
+        keypoints: torch.Tensor,
+        recovery_vector: torch.Tensor,
+        distance: torch.Tensor,
+        chunks: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """(B, K, D) keypoints, (B, D) or (B, K, D) recovery vectors, (B,) distances -> (B, L, K, D).
+
+        chunks: (B,) recovery chunks each row has already executed since it started recovering
+        (used by `delay_countdown`; None = 0).
+        """
         vec = recovery_vector
         if self.normalize:
             norm = torch.linalg.vector_norm(vec, dim=-1, keepdim=True)
@@ -107,4 +124,7 @@ class RecoveryPlanner:
             delay = recovery_delay(distance, self.d_min, self.d_max, self.horizon)
         else:
             delay = torch.full((keypoints.shape[0],), self.fixed_delay, dtype=torch.long, device=keypoints.device)
+        if self.delay_countdown and chunks is not None:
+            cap = (self.horizon - self.delay_countdown * torch.as_tensor(chunks, device=delay.device)).clamp_min(0)
+            delay = torch.minimum(delay, cap.to(delay.dtype))
         return plan_keypoint_trajectory(keypoints, vec, self.step_size, self.horizon, delay)

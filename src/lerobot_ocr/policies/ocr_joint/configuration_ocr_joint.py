@@ -55,7 +55,12 @@ class OcrJointConfig(PreTrainedConfig):
         step_size (alpha, object units per frame), horizon (L), d_min / d_max (delay ramp),
         fixed_delay: frames the planned keypoints hold still whatever the distance (replaces the
             ramp; the reference's Push-T eval uses 12 of 16 and executes all 16 actions),
+        delay_countdown: the delay is capped at L - delay_countdown * (chunks already executed in
+            this recovery), so a robot that hovers near the object is eventually asked to move it
+            (the reference's Square eval: 16 -> 0, one frame per call); 0 = off,
         n_recovery_action_steps: actions executed per recovery chunk before re-deciding.
+        recovery_action_repeat: env steps each recovery action is held (absolute targets: the
+            controller settles on each before the next; the reference's Square eval holds 3).
     Inverse policy: LeRobot's diffusion U-Net (`down_dims`, ...), DDIM with
         `num_inference_steps` steps by default.
     """
@@ -91,7 +96,9 @@ class OcrJointConfig(PreTrainedConfig):
     d_min: float = 15.0
     d_max: float = 60.0
     fixed_delay: int | None = None
+    delay_countdown: int = 0
     n_recovery_action_steps: int = 8
+    recovery_action_repeat: int = 1
 
     # Keypoint inverse policy (LeRobot's diffusion U-Net).
     down_dims: tuple[int, ...] = (256, 512, 1024)
@@ -142,10 +149,14 @@ class OcrJointConfig(PreTrainedConfig):
             )
         if not 1 <= self.n_recovery_action_steps <= self.horizon:
             raise ValueError(f"--policy.n_recovery_action_steps must be in [1, horizon={self.horizon}].")
+        if self.recovery_action_repeat < 1:
+            raise ValueError(f"--policy.recovery_action_repeat must be >= 1, got {self.recovery_action_repeat}.")
         if not self.d_max > self.d_min:
             raise ValueError(f"Need d_max > d_min, got d_min={self.d_min}, d_max={self.d_max}.")
         if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:
             raise ValueError(f"--policy.fixed_delay must be in [0, horizon={self.horizon}) or None, got {self.fixed_delay}.")
+        if self.delay_countdown < 0:
+            raise ValueError(f"--policy.delay_countdown must be >= 0, got {self.delay_countdown}.")
         if self.hysteresis < 0:
             raise ValueError(f"--policy.hysteresis must be >= 0, got {self.hysteresis}.")
 

@@ -3,7 +3,7 @@
 Per batch row: object pose -> keypoints -> manifold score. A row whose score falls below the
 threshold switches to recovery: the manifold's recovery vector, the planner's keypoint trajectory
 (L frames) and the keypoint inverse policy give L actions, of which `n_recovery_action_steps` are
-executed before the row decides again. Other rows run the base. As in the paper, decisions are made
+executed (each held `recovery_action_repeat` env steps) before the row decides again. Other rows run the base. As in the paper, decisions are made
 at chunk boundaries: while every row is inside a base chunk nothing is checked (the step costs what
 the base costs); `check_every_step=True` checks every row at every step.
 
@@ -113,7 +113,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         )  # fmt: skip
         self.planner = RecoveryPlanner(
             horizon=config.horizon, step_size=config.step_size, d_min=config.d_min, d_max=config.d_max, normalize=True,
-            fixed_delay=config.fixed_delay,
+            fixed_delay=config.fixed_delay, delay_countdown=config.delay_countdown,
         )  # fmt: skip
 
         bundled = Path(bundle_dir) / BASE_DIR if bundle_dir is not None else None
@@ -251,8 +251,10 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._batch_size = b
         self._recovering = torch.zeros(b, dtype=torch.bool, device=device)
         self._returned = torch.zeros(b, dtype=torch.bool, device=device)
-        self._rec_actions = torch.zeros(b, self.config.n_recovery_action_steps, action_dim, device=device)
+        n = self.config.n_recovery_action_steps * self.config.recovery_action_repeat
+        self._rec_actions = torch.zeros(b, n, action_dim, device=device)
         self._rec_left = torch.zeros(b, dtype=torch.long, device=device)
+        self._rec_count = torch.zeros(b, dtype=torch.long, device=device)  # chunks since the row entered recovery
 
     def _observation(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         cfg = self.config
@@ -278,9 +280,17 @@ class OcrJointPolicy(PreTrainedPolicy):
         return torch.linalg.vector_norm(keypoints - ee[:, None], dim=-1).amin(-1)
 
     def recovery_actions(
-        self, frames: torch.Tensor, keypoints: torch.Tensor, state: torch.Tensor, noise: torch.Tensor | None = None
+        self,
+        frames: torch.Tensor,
+        keypoints: torch.Tensor,
+        state: torch.Tensor,
+        noise: torch.Tensor | None = None,
+        chunks: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Plan and sample one recovery chunk per row: world actions (R, L, A) and the plan (R, L, K, D)."""
+        """Plan and sample one recovery chunk per row: world actions (R, L, A) and the plan (R, L, K, D).
+
+        chunks: (R,) chunks each row already executed in this recovery (for `delay_countdown`).
+        """
         cfg = self.config
         out = self.manifold.recovery(keypoints.double(), magnitude=cfg.magnitude)
         vector = out.vector
@@ -288,7 +298,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         if bool(weak.any()):  # deficit 0 on every keypoint yet OOD on average: fall back to the paper's direction
             vector = vector.clone()
             vector[weak] = self.manifold.recovery(keypoints[weak].double(), magnitude="paper").vector
-        plan = self.planner(keypoints, vector.to(keypoints.dtype), self._distance(state, keypoints))
+        plan = self.planner(keypoints, vector.to(keypoints.dtype), self._distance(state, keypoints), chunks)
         return self.inverse.sample(plan, state, frames, noise=noise), plan
 
     def _base_action(self, batch: dict[str, torch.Tensor], rows_on_base: torch.Tensor) -> torch.Tensor | None:
@@ -331,14 +341,18 @@ class OcrJointPolicy(PreTrainedPolicy):
         # Rows on the base that left the distribution start recovering (unless latched).
         enter = ~self._recovering & ood & ~(self._returned & cfg.latch)
         self._recovering = self._recovering | enter
+        self._rec_count[enter] = 0
         need_chunk = self._recovering & (self._rec_left == 0)
 
         if bool(need_chunk.any()):
             rows = need_chunk.nonzero().squeeze(-1)
-            actions, _ = self.recovery_actions(frames[rows], keypoints[rows], state[rows], noise=noise)
-            n = cfg.n_recovery_action_steps
-            self._rec_actions[rows] = actions[:, :n].to(self._rec_actions.dtype)
-            self._rec_left[rows] = n
+            actions, _ = self.recovery_actions(
+                frames[rows], keypoints[rows], state[rows], noise=noise, chunks=self._rec_count[rows]
+            )
+            self._rec_count[rows] += 1
+            chunk = actions[:, : cfg.n_recovery_action_steps].repeat_interleave(cfg.recovery_action_repeat, dim=1)
+            self._rec_actions[rows] = chunk.to(self._rec_actions.dtype)
+            self._rec_left[rows] = chunk.shape[1]
             self._n_chunks += len(rows)
         if bool(handback.any()):
             drop_queued_actions(self.base)  # its queue was planned before or during the recovery
@@ -350,7 +364,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         if base_action is not None:
             out[~rec] = base_action.to(device, out.dtype)[~rec]
         if bool(rec.any()):
-            step = cfg.n_recovery_action_steps - self._rec_left[rec]
+            step = self._rec_actions.shape[1] - self._rec_left[rec]
             out[rec] = self._rec_actions[rec, step]
             self._rec_left[rec] -= 1
         self._any_recovering = bool(rec.any())

@@ -15,7 +15,9 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import json
+import os
 import platform
+import shlex
 import sys
 from pathlib import Path
 
@@ -86,16 +88,16 @@ def main() -> None:
             print(json.dumps(row), flush=True)
             rows.append(row)
 
-    command = "`.venv/bin/python benchmarks/inverse_policy_error.py " + " ".join(sys.argv[1:]) + "`"
+    command = "`.venv/bin/python benchmarks/inverse_policy_error.py " + shlex.join(sys.argv[1:]) + "`"
     result = {"rows": rows, "windows": args.windows, "executed": args.executed, "command": command,
-              "date": dt.date.today().isoformat(), "machine": f"{platform.machine()}, CPU"}  # fmt: skip
+              "date": dt.date.today().isoformat(), "machine": f"{platform.machine()}, {os.cpu_count()} cores"}  # fmt: skip
     out = HERE / "results" / "inverse_policy_error.json"
     out.write_text(json.dumps(result, indent=2))
     has_grip = any("gripper_mismatch" in r for r in rows)
     lines = [
         f"{args.windows} random training windows of `{args.dataset}`; the inverse policy samples the actions of each "
-        f"window from its demo keypoint trajectory and state. Errors are world-frame end-effector target distances over "
-        f"the first {args.executed} actions (what a recovery chunk executes); \"hold ee\" is the error of predicting "
+        f"window from its demo keypoint trajectory and state. Errors are world-frame end-effector target distances (the "
+        f"action's units) over the first {args.executed} actions (what a recovery chunk executes); \"hold ee\" is the error of predicting "
         "the current end-effector position, what a policy that learned nothing reaches.",
         "",
         "| checkpoint | denoising steps | first action error | executed error (mean / median) | hold ee error |"

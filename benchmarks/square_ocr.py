@@ -20,7 +20,7 @@ from ocr_pipeline import Task  # noqa: E402
 PROFILES = {
     "cpu": {
         "demos": 200, "base": "lowdim", "base_steps": 30000, "base_batch": 64, "base_dims": "[64,128,256]",
-        "ocr_steps": 10000, "ocr_batch": 64, "ocr_dims": "[64,128,256]", "episodes": 50, "eval_batch": 10,
+        "ocr_steps": 30000, "ocr_batch": 64, "ocr_dims": "[64,128,256]", "episodes": 50, "eval_batch": 10,
         "device": "cpu",
     },
     "gpu": {

@@ -84,10 +84,10 @@ class RecoveryPlanner:
     fixed_delay: hold the keypoints still for this many frames whatever the distance, instead of
     the d_min/d_max ramp (the reference's Push-T eval: 12 of 16, so the robot first gets round
     the object and the plan asks for a short push).
-    delay_countdown: frames the delay may be at most shrinks by per chunk already planned in this
-    recovery (`chunks`): delay = min(delay, max(0, L - delay_countdown * chunks)). 0 = off. It
-    breaks stalls where the robot hovers at a distance that keeps the plan still (the reference's
-    Square eval counts the delay down 16 -> 0, one frame per call, whatever the distance).
+    delay_countdown: the delay's upper bound drops by this many frames per chunk already run in
+    this recovery (`chunks`): delay = min(delay, max(0, L - delay_countdown * chunks)); 0 = off.
+    It breaks stalls where the robot hovers at a distance that keeps the plan still (the
+    reference's Square eval counts the delay down 16 -> 0, one frame per call, whatever the distance).
     """
 
     horizon: int = 16

@@ -59,8 +59,9 @@ class OcrJointConfig(PreTrainedConfig):
             this recovery), so a robot that hovers near the object is eventually asked to move it
             (the reference's Square eval: 16 -> 0, one frame per call); 0 = off,
         n_recovery_action_steps: actions executed per recovery chunk before re-deciding.
-        recovery_action_repeat: env steps each recovery action is held (absolute targets: the
-            controller settles on each before the next; the reference's Square eval holds 3).
+        recovery_action_repeat: env steps each recovery action is held by `select_action`
+            (absolute targets: the controller settles on each before the next; the reference's
+            Square eval holds 3; `predict_action_chunk` returns the actions unrepeated).
     Inverse policy: LeRobot's diffusion U-Net (`down_dims`, ...), DDIM with
         `num_inference_steps` steps by default.
     """

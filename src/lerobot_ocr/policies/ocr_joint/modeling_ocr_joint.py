@@ -3,9 +3,10 @@
 Per batch row: object pose -> keypoints -> manifold score. A row whose score falls below the
 threshold switches to recovery: the manifold's recovery vector, the planner's keypoint trajectory
 (L frames) and the keypoint inverse policy give L actions, of which `n_recovery_action_steps` are
-executed (each held `recovery_action_repeat` env steps) before the row decides again. Other rows run the base. As in the paper, decisions are made
-at chunk boundaries: while every row is inside a base chunk nothing is checked (the step costs what
-the base costs); `check_every_step=True` checks every row at every step.
+executed (each held `recovery_action_repeat` env steps) before the row decides again. Other rows run
+the base. As in the paper, decisions are made at chunk boundaries: while every row is inside a base
+chunk nothing is checked (the step costs what the base costs); `check_every_step=True` checks every
+row at every step.
 
 The base sees every observation, also while a row recovers (its observation history stays right),
 and its queued actions are dropped whenever a row hands back to it, so it never executes a chunk

@@ -54,7 +54,7 @@ def window_errors(policy, windows: dict, executed: int, inference_steps: int | N
         "executed_error_median": float(err[:, :executed][valid[:, :executed]].median()),
         "hold_ee_error": float(floor[:, :executed][valid[:, :executed]].mean()),
     }
-    if actions.shape[-1] > FrameSpec.parse(cfg.action_frame).world_size(d):  # a command after the pose (a gripper): compare signs
+    if actions.shape[-1] > FrameSpec.parse(cfg.action_frame).world_size(d):  # a gripper command after the pose
         wrong = torch.sign(actions[..., -1]) != torch.sign(windows["actions"][..., -1])
         out["gripper_mismatch"] = float(wrong[:, :executed][valid[:, :executed]].float().mean())
     return out

@@ -25,7 +25,7 @@ PROFILES = {
         "device": "cpu",
     },
     "cpu": {
-        "demos": 100, "base": "lowdim", "base_steps": 30000, "base_batch": 64, "base_dims": "[64,128,256]",
+        "demos": 100, "base": "lowdim", "base_steps": 60000, "base_batch": 64, "base_dims": "[64,128,256]",
         "ocr_steps": 10000, "ocr_batch": 64, "ocr_dims": "[64,128,256]", "episodes": 50, "eval_batch": 10,
         "device": "cpu",
     },

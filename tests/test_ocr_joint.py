@@ -106,7 +106,9 @@ def test_delay_countdown_counts_chunks_per_recovery(diffusion_base, converted_da
         diffusion_base, converted_dataset, n_recovery_action_steps=1, check_every_step=True, delay_countdown=8
     )
     seen, planner = [], joint.planner
-    joint.planner = lambda kps, vec, dist, chunks=None: seen.append(chunks.tolist()) or planner(kps, vec, dist, chunks)
+    joint.planner = lambda kps, vec, dist, chunks=None, grasped=None: (
+        seen.append(chunks.tolist()) or planner(kps, vec, dist, chunks, grasped)
+    )
     joint.reset()
     far = [[20.0, 480.0]]  # the agent far from the T: the ramp alone would hold the plan still
     for pose in (OOD_POSE, OOD_POSE, OOD_POSE, id_pose, OOD_POSE):
@@ -117,6 +119,39 @@ def test_delay_countdown_counts_chunks_per_recovery(diffusion_base, converted_da
     still = planner(kps, vec, torch.tensor([1000.0]), torch.tensor([0]))
     pushed = planner(kps, vec, torch.tensor([1000.0]), torch.tensor([2]))  # cap 16 - 16 = 0 frames still
     assert torch.equal(still[0, -1], kps[0]) and not torch.equal(pushed[0, 1], kps[0])
+
+
+def test_grasp_delay_follows_the_previous_chunks_last_gripper_command(diffusion_base, converted_dataset, id_pose, monkeypatch):
+    """A row counts as holding the object when its previous recovery chunk ended with a close command."""
+    joint = make_joint(
+        diffusion_base, converted_dataset, n_recovery_action_steps=2, check_every_step=True, grasp_delay=0,
+        gripper_action_index=1,
+    )
+    seen, planner = [], joint.planner
+    joint.planner = lambda kps, vec, dist, chunks=None, grasped=None: (
+        seen.append(grasped.tolist()) or planner(kps, vec, dist, chunks, grasped)
+    )
+    horizon = TINY_OCR["horizon"]
+    # Chunk i's actions: (x, gripper); the second executed action (index 1) is the chunk's last.
+    grippers = iter([[-1.0, 1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]])
+
+    def sample(plan, state, frames, noise=None):
+        chunk = torch.full((len(plan), horizon, 2), -1.0)
+        chunk[:, :2, 1] = torch.tensor(next(grippers))
+        return chunk
+
+    monkeypatch.setattr(joint.inverse, "sample", sample)
+    joint.reset()
+    for pose in [OOD_POSE] * 6 + [id_pose] * 2 + [OOD_POSE] * 4:
+        joint.select_action(observation([pose]))
+    # chunks 1-3: a new recovery, then closed, then opened; hand back; chunk 4 starts a new recovery
+    # (unheld, though chunk 3 ended closed), chunk 5 follows chunk 4's close
+    assert seen == [[False], [True], [False], [False], [True]]
+    assert joint.planner(torch.zeros(1, 1, 2), torch.ones(1, 2), torch.tensor([1e6]), None, torch.tensor([True]))[
+        0, 1
+    ].abs().sum() > 0  # grasp_delay 0: the held object moves from frame 1 even though the robot is "far"
+    with pytest.raises(ValueError, match="gripper_action_index"):
+        make_joint(diffusion_base, converted_dataset, grasp_delay=0, gripper_action_index=2)
 
 
 def test_base_history_stays_right_through_a_recovery(diffusion_base, converted_dataset, id_pose):

@@ -87,3 +87,18 @@ def test_delay_countdown_caps_the_delay_per_chunk():
     torch.testing.assert_close(planner(kps, vec, far), traj[[0]].expand(4, -1, -1, -1))  # no chunks: no cap
     with pytest.raises(ValueError, match="delay_countdown"):
         RecoveryPlanner(horizon=8, delay_countdown=-1)
+
+
+def test_grasp_delay_replaces_the_delay_of_rows_that_hold_the_object():
+    """Far away the ramp holds still (delay L); a grasped row uses grasp_delay instead, others keep theirs."""
+    planner = RecoveryPlanner(horizon=8, step_size=1.0, d_min=10.0, d_max=50.0, grasp_delay=2)
+    kps = torch.zeros(3, 1, 2)
+    vec = torch.tensor([[1.0, 0.0]]).expand(3, -1)
+    dist = torch.tensor([100.0, 100.0, 0.0])
+    traj = planner(kps, vec, dist, grasped=torch.tensor([True, False, True]))
+    assert traj[:, -1, 0, 0].tolist() == [5.0, 0.0, 5.0]  # moving frames = L - 1 - delay: 2, 8 (ramp), 2
+    torch.testing.assert_close(planner(kps, vec, dist)[:2], traj[[1, 1]])  # grasped unknown: the ramp
+    off = RecoveryPlanner(horizon=8, step_size=1.0, d_min=10.0, d_max=50.0)
+    torch.testing.assert_close(off(kps, vec, dist, grasped=torch.ones(3, dtype=torch.bool))[:2], traj[[1, 1]])
+    with pytest.raises(ValueError, match="grasp_delay"):
+        RecoveryPlanner(horizon=8, grasp_delay=8)

@@ -88,3 +88,5 @@ def test_config_rejects_bad_recovery_settings():
         OcrJointConfig(device="cpu", recovery_action_repeat=0)
     with pytest.raises(ValueError, match="delay_countdown must be >= 0"):
         OcrJointConfig(device="cpu", delay_countdown=-1)
+    with pytest.raises(ValueError, match="grasp_delay must be in"):
+        OcrJointConfig(device="cpu", grasp_delay=-1)

@@ -88,6 +88,9 @@ class RecoveryPlanner:
     this recovery (`chunks`): delay = min(delay, max(0, L - delay_countdown * chunks)); 0 = off.
     It breaks stalls where the robot hovers at a distance that keeps the plan still (the
     reference's Square eval counts the delay down 16 -> 0, one frame per call, whatever the distance).
+    grasp_delay: the delay for rows whose gripper holds the object (`grasped`), whatever the
+    distance; None = off. The reference's real robot uses 0 once the gripper is closed: a held
+    object moves from frame 1 instead of every chunk restarting with still frames.
     """
 
     horizon: int = 16
@@ -97,12 +100,15 @@ class RecoveryPlanner:
     normalize: bool = True
     fixed_delay: int | None = None
     delay_countdown: int = 0
+    grasp_delay: int | None = None
 
     def __post_init__(self):
         if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:
             raise ValueError(f"fixed_delay must be in [0, horizon={self.horizon}), got {self.fixed_delay}.")
         if self.delay_countdown < 0:
             raise ValueError(f"delay_countdown must be >= 0, got {self.delay_countdown}.")
+        if self.grasp_delay is not None and not 0 <= self.grasp_delay < self.horizon:
+            raise ValueError(f"grasp_delay must be in [0, horizon={self.horizon}), got {self.grasp_delay}.")
 
     def __call__(
         self,
@@ -110,11 +116,13 @@ class RecoveryPlanner:
         recovery_vector: torch.Tensor,
         distance: torch.Tensor,
         chunks: torch.Tensor | None = None,
+        grasped: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """(B, K, D) keypoints, (B, D) or (B, K, D) recovery vectors, (B,) distances -> (B, L, K, D).
 
         chunks: (B,) recovery chunks each row has already executed since it started recovering
         (used by `delay_countdown`; None = 0).
+        grasped: (B,) bool, rows whose gripper holds the object (used by `grasp_delay`; None = none).
         """
         vec = recovery_vector
         if self.normalize:
@@ -124,6 +132,9 @@ class RecoveryPlanner:
             delay = recovery_delay(distance, self.d_min, self.d_max, self.horizon)
         else:
             delay = torch.full((keypoints.shape[0],), self.fixed_delay, dtype=torch.long, device=keypoints.device)
+        if self.grasp_delay is not None and grasped is not None:
+            held = torch.as_tensor(grasped, dtype=torch.bool, device=delay.device)
+            delay = torch.where(held, torch.full_like(delay, self.grasp_delay), delay)
         if self.delay_countdown and chunks is not None:
             cap = (self.horizon - self.delay_countdown * torch.as_tensor(chunks, device=delay.device)).clamp_min(0)
             delay = torch.minimum(delay, cap.to(delay.dtype))

@@ -58,6 +58,11 @@ class OcrJointConfig(PreTrainedConfig):
         delay_countdown: the delay is capped at L - delay_countdown * (chunks already executed in
             this recovery), so a robot that hovers near the object is eventually asked to move it
             (the reference's Square eval: 16 -> 0, one frame per call); 0 = off,
+        grasp_delay: the delay once the robot holds the object, i.e. when the last action of the
+            row's previous recovery chunk closed the gripper (its `gripper_action_index` entry > 0,
+            the -1 open / +1 closed convention); None = off. The reference's real-robot rule is 0:
+            carry the object at once, instead of re-planning a still start at every chunk,
+        gripper_action_index: which action entry is the gripper command (used by `grasp_delay`).
         n_recovery_action_steps: actions executed per recovery chunk before re-deciding.
         recovery_action_repeat: env steps each recovery action is held by `select_action`
             (absolute targets: the controller settles on each before the next; the reference's
@@ -98,6 +103,8 @@ class OcrJointConfig(PreTrainedConfig):
     d_max: float = 60.0
     fixed_delay: int | None = None
     delay_countdown: int = 0
+    grasp_delay: int | None = None
+    gripper_action_index: int = -1
     n_recovery_action_steps: int = 8
     recovery_action_repeat: int = 1
 
@@ -158,6 +165,8 @@ class OcrJointConfig(PreTrainedConfig):
             raise ValueError(f"--policy.fixed_delay must be in [0, horizon={self.horizon}) or None, got {self.fixed_delay}.")
         if self.delay_countdown < 0:
             raise ValueError(f"--policy.delay_countdown must be >= 0, got {self.delay_countdown}.")
+        if self.grasp_delay is not None and not 0 <= self.grasp_delay < self.horizon:
+            raise ValueError(f"--policy.grasp_delay must be in [0, horizon={self.horizon}) or None, got {self.grasp_delay}.")
         if self.hysteresis < 0:
             raise ValueError(f"--policy.hysteresis must be >= 0, got {self.hysteresis}.")
 
@@ -180,6 +189,12 @@ class OcrJointConfig(PreTrainedConfig):
             )
         if ACTION not in self.output_features:
             raise ValueError("The dataset has no `action` feature.")
+        action_dim = self.output_features[ACTION].shape[0]
+        if self.grasp_delay is not None and not -action_dim <= self.gripper_action_index < action_dim:
+            raise ValueError(
+                f"--policy.gripper_action_index={self.gripper_action_index} is outside the {action_dim}-D action; "
+                "point it at the gripper command, or leave --policy.grasp_delay unset for a task without a gripper."
+            )
         size = self.input_features[self.object_pose_key].shape[-1]
         if size != pose_size(self.pose_rotation):
             raise ValueError(

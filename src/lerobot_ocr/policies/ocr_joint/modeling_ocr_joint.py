@@ -114,7 +114,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         )  # fmt: skip
         self.planner = RecoveryPlanner(
             horizon=config.horizon, step_size=config.step_size, d_min=config.d_min, d_max=config.d_max, normalize=True,
-            fixed_delay=config.fixed_delay, delay_countdown=config.delay_countdown,
+            fixed_delay=config.fixed_delay, delay_countdown=config.delay_countdown, grasp_delay=config.grasp_delay,
         )  # fmt: skip
 
         bundled = Path(bundle_dir) / BASE_DIR if bundle_dir is not None else None
@@ -287,10 +287,12 @@ class OcrJointPolicy(PreTrainedPolicy):
         state: torch.Tensor,
         noise: torch.Tensor | None = None,
         chunks: torch.Tensor | None = None,
+        grasped: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Plan and sample one recovery chunk per row: world actions (R, L, A) and the plan (R, L, K, D).
 
         chunks: (R,) chunks each row already executed in this recovery (for `delay_countdown`).
+        grasped: (R,) bool, rows whose gripper holds the object (for `grasp_delay`).
         """
         cfg = self.config
         out = self.manifold.recovery(keypoints.double(), magnitude=cfg.magnitude)
@@ -299,7 +301,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         if bool(weak.any()):  # deficit 0 on every keypoint yet OOD on average: fall back to the paper's direction
             vector = vector.clone()
             vector[weak] = self.manifold.recovery(keypoints[weak].double(), magnitude="paper").vector
-        plan = self.planner(keypoints, vector.to(keypoints.dtype), self._distance(state, keypoints), chunks)
+        plan = self.planner(keypoints, vector.to(keypoints.dtype), self._distance(state, keypoints), chunks, grasped)
         return self.inverse.sample(plan, state, frames, noise=noise), plan
 
     def _base_action(self, batch: dict[str, torch.Tensor], rows_on_base: torch.Tensor) -> torch.Tensor | None:
@@ -347,8 +349,10 @@ class OcrJointPolicy(PreTrainedPolicy):
 
         if bool(need_chunk.any()):
             rows = need_chunk.nonzero().squeeze(-1)
+            # Holding the object = this recovery's previous chunk ended with a close command.
+            grasped = (self._rec_count[rows] > 0) & (self._rec_actions[rows, -1, cfg.gripper_action_index] > 0)
             actions, _ = self.recovery_actions(
-                frames[rows], keypoints[rows], state[rows], noise=noise, chunks=self._rec_count[rows]
+                frames[rows], keypoints[rows], state[rows], noise=noise, chunks=self._rec_count[rows], grasped=grasped
             )
             self._rec_count[rows] += 1
             chunk = actions[:, : cfg.n_recovery_action_steps].repeat_interleave(cfg.recovery_action_repeat, dim=1)

@@ -96,7 +96,7 @@ def test_grasp_delay_replaces_the_delay_of_rows_that_hold_the_object():
     vec = torch.tensor([[1.0, 0.0]]).expand(3, -1)
     dist = torch.tensor([100.0, 100.0, 0.0])
     traj = planner(kps, vec, dist, grasped=torch.tensor([True, False, True]))
-    assert traj[:, -1, 0, 0].tolist() == [5.0, 0.0, 5.0]  # moving frames = L - 1 - delay: 2, 8 (ramp), 2
+    assert traj[:, -1, 0, 0].tolist() == [5.0, 0.0, 5.0]  # moving frames = L - 1 - delay; delays 2, 8 (the ramp), 2
     torch.testing.assert_close(planner(kps, vec, dist)[:2], traj[[1, 1]])  # grasped unknown: the ramp
     off = RecoveryPlanner(horizon=8, step_size=1.0, d_min=10.0, d_max=50.0)
     torch.testing.assert_close(off(kps, vec, dist, grasped=torch.ones(3, dtype=torch.bool))[:2], traj[[1, 1]])

@@ -27,7 +27,10 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
-sys.path.insert(0, str(HERE))
+SRC = REPO / "src"
+# This clone's sources first: the cached virtualenv is shared by clones with the same lock file, and its
+# editable install points at whichever clone ran scripts/setup.sh last.
+sys.path[:0] = [str(HERE), str(SRC)]
 from results_md import update_section  # noqa: E402
 
 BIN = Path(sys.executable).parent
@@ -63,7 +66,9 @@ class Task:
 
 def run(cmd: list[str], log: Path) -> None:
     log.parent.mkdir(parents=True, exist_ok=True)
-    env = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "SDL_VIDEODRIVER": "dummy"}
+    pythonpath = os.pathsep.join(filter(None, [str(SRC), os.environ.get("PYTHONPATH")]))  # this clone first (see SRC)
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "SDL_VIDEODRIVER": "dummy",
+           "PYTHONPATH": pythonpath}  # fmt: skip
     with open(log, "w") as f:
         f.write(" ".join(cmd) + "\n\n")
         f.flush()

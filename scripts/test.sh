@@ -5,5 +5,8 @@ set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 bash "$ROOT/scripts/setup.sh"
 cd "$ROOT"
+# This clone's sources first: the cached venv is shared by clones with the same lock file and its
+# editable install points at whichever clone ran setup last.
+export PYTHONPATH="$ROOT/src${PYTHONPATH:+:$PYTHONPATH}"
 export MUJOCO_GL=${MUJOCO_GL:-egl} SDL_VIDEODRIVER=${SDL_VIDEODRIVER:-dummy} HF_HUB_OFFLINE=${HF_HUB_OFFLINE:-1}
 exec .venv/bin/python -m pytest "$@"

@@ -70,7 +70,7 @@ def main() -> None:
     parser.add_argument("--executed", type=int, default=8, help="actions per recovery chunk that the robot executes")
     parser.add_argument("--steps", type=int, nargs="*", default=[0], help="denoising steps (0 = the checkpoint's)")
     parser.add_argument("--title", default="Inverse policy precision")
-    parser.add_argument("--no-update", action="store_true", help="do not rewrite RESULTS.md")
+    parser.add_argument("--no-update", action="store_true", help="print the rows only: write neither results/inverse_policy_error.json nor RESULTS.md")
     args = parser.parse_args()
     torch.set_num_threads(1)
 
@@ -91,8 +91,8 @@ def main() -> None:
     command = "`.venv/bin/python benchmarks/inverse_policy_error.py " + shlex.join(sys.argv[1:]) + "`"
     result = {"rows": rows, "windows": args.windows, "executed": args.executed, "command": command,
               "date": dt.date.today().isoformat(), "machine": f"{platform.machine()}, {os.cpu_count()} cores"}  # fmt: skip
-    out = HERE / "results" / "inverse_policy_error.json"
-    out.write_text(json.dumps(result, indent=2))
+    if not args.no_update:
+        (HERE / "results" / "inverse_policy_error.json").write_text(json.dumps(result, indent=2))
     has_grip = any("gripper_mismatch" in r for r in rows)
     lines = [
         f"{args.windows} random training windows of `{args.dataset}`; the inverse policy samples the actions of each "

@@ -1,6 +1,6 @@
 import pytest
 
-from lerobot_ocr.eval_report import format_table, summarize, wilson_interval
+from lerobot_ocr.eval_report import format_start_split, format_table, summarize, wilson_interval
 
 
 @pytest.mark.parametrize(
@@ -21,3 +21,20 @@ def test_summarize_and_table():
     assert row["ci95"][0] < 0.75 < row["ci95"][1]
     table = format_table({"joint_ood": row, "base_ood": summarize(info, None)})
     assert "| joint_ood | 0.75 |" in table and "| 25% |" in table and table.splitlines()[-1].endswith("| — |")
+
+
+def test_successes_split_by_where_episodes_started():
+    info = {
+        "per_task": [{"metrics": {"successes": [True, False, True, True, False]}}],
+        "overall": {"avg_max_reward": 0.6, "eval_s": 1.0},
+    }
+    # one surplus row from a last partial batch, which lerobot-eval drops: it must not count
+    row = summarize(info, {"mean_recovery_fraction": 0.4, "started_ood": [True, True, False, True, False, True]})
+    assert row["started_ood"] == {"episodes": 3, "successes": 2}
+    assert row["started_id"] == {"episodes": 2, "successes": 1}
+    line = format_start_split({"joint_ood": row, "base_ood": summarize(info, None)})
+    assert line == (
+        "joint_ood: 3 started out of distribution (recovery first): 2 succeeded (0.67); "
+        "2 started on the base: 1 succeeded (0.50)"
+    )
+    assert "started_ood" not in summarize(info, {"mean_recovery_fraction": 0.4, "started_ood": [True]})

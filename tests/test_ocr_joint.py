@@ -86,6 +86,7 @@ def test_switch_is_decided_per_row(joint, id_pose, monkeypatch):
     expected = joint._base_post(joint.base.select_action(joint._base_pre(dict(batch))))
     torch.testing.assert_close(action[[0, 2]], expected[[0, 2]])
     assert stats["recovery_fraction"] == [0.0, 1.0, 0.0] and stats["recovery_chunks"] == 1
+    assert stats["started_ood"] == [False, True, False]
 
 
 def test_recovery_actions_are_held_for_the_repeat(diffusion_base, converted_dataset, monkeypatch):

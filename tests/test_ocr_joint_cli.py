@@ -40,3 +40,4 @@ def test_convert_train_eval(pusht_dataset, diffusion_base, tmp_path, monkeypatch
     assert info["overall"]["n_episodes"] == 1
     stats = json.loads((out / "ocr_stats.json").read_text())
     assert stats["mean_recovery_fraction"] > 0 and stats["recovery_chunks"] >= 1  # an OOD start triggers recovery
+    assert stats["started_ood"] == [True]  # per episode: its first observation was flagged

@@ -50,11 +50,14 @@ def _convert(args: argparse.Namespace) -> int:
 
 
 def _eval(args: argparse.Namespace) -> int:
-    from lerobot_ocr.eval_report import format_table, run_eval
+    from lerobot_ocr.eval_report import format_start_split, format_table, run_eval
 
     result = run_eval(args.lerobot_eval_args)
     print(json.dumps(result))
     print("\n" + format_table({"eval": result}))
+    split = format_start_split({"eval": result})
+    if split:
+        print(split)
     return 0
 
 

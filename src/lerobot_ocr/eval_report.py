@@ -2,7 +2,8 @@
 
 Runs LeRobot's own eval in-process with the arguments given (`--policy.path=… --env.type=… …`).
 When the policy is `ocr_joint`, its per-batch `ocr_stats()` are collected and written to
-`<output_dir>/ocr_stats.json` (mean fraction of steps in recovery, recovery chunks, hand-backs).
+`<output_dir>/ocr_stats.json` (mean fraction of steps in recovery, recovery chunks, hand-backs, and per
+episode whether the switch flagged its first observation, so that successes split by where they started).
 """
 
 from __future__ import annotations
@@ -44,7 +45,26 @@ def summarize(eval_info: dict, ocr: dict | None) -> dict:
     }
     if ocr is not None:
         out["mean_recovery_fraction"] = ocr["mean_recovery_fraction"]
+        started = ocr.get("started_ood")
+        if started is not None and len(started) >= n:  # lerobot-eval drops a last batch's surplus episodes
+            for name, flag in (("started_ood", True), ("started_id", False)):
+                picked = [s for s, f in zip(successes, started) if bool(f) == flag]
+                out[name] = {"episodes": len(picked), "successes": sum(picked)}
     return out
+
+
+def format_start_split(rows: dict[str, dict]) -> str:
+    """One line per ocr_joint run: how episodes that began in recovery vs on the base ended."""
+    lines = []
+    for name, r in rows.items():
+        if "started_ood" not in r:
+            continue
+        parts = []
+        for key, what in (("started_ood", "started out of distribution (recovery first)"), ("started_id", "started on the base")):
+            k, n = r[key]["successes"], r[key]["episodes"]
+            parts.append(f"{n} {what}: {k} succeeded" + (f" ({k / n:.2f})" if n else ""))
+        lines.append(f"{name}: " + "; ".join(parts))
+    return "\n".join(lines)
 
 
 def run_eval(args: list[str]) -> dict:
@@ -83,6 +103,8 @@ def run_eval(args: list[str]) -> dict:
             "recovery_chunks": sum(b["recovery_chunks"] for b in batches),
             "handbacks": sum(b["handbacks"] for b in batches),
             "threshold": batches[0]["threshold"] if batches else None,
+            # per episode, in eval_info's order (batches run one after another, rows in env order)
+            "started_ood": [bool(f) for b in batches for f in b["started_ood"]],
         }
         (Path(output_dir) / "ocr_stats.json").write_text(json.dumps(ocr, indent=2))
     return summarize(eval_info, ocr)

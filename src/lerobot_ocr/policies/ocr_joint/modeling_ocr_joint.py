@@ -403,6 +403,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             "threshold": float(self.manifold.threshold_),
             "score_type": self.config.score_type,
             "recovery_fraction": modes.mean(0).tolist(),
+            "started_ood": modes[0].tolist(),  # per row: the switch flagged the episode's first observation
             "mean_recovery_fraction": float(modes.mean()),
             "recovery_chunks": self._n_chunks,
             "handbacks": self._n_handbacks,

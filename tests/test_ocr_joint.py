@@ -316,3 +316,32 @@ def test_act_base(pusht_dataset, converted_dataset, id_pose):
     assert modes[:, 0].tolist() == [False] * 3 and modes[:, 1].tolist() == [True, True, False]
     chunk = joint.predict_action_chunk(observation([id_pose, OOD_POSE]))
     assert chunk.shape == (2, 2, 2)
+
+
+def test_a_held_object_is_carried_along_the_plan(diffusion_base, converted_dataset, monkeypatch):
+    """--policy.carry_tolerance: after a chunk in which the object moved with the closed gripper, the next
+    chunk shifts the last action along a plan that moves at once; otherwise the inverse policy is sampled."""
+    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=2, carry_tolerance=1.0)
+    sampled = []
+
+    def sample(plan, state, frames, noise=None):
+        sampled.append(len(plan))
+        return torch.full((len(plan), TINY_OCR["horizon"], 2), 150.0)  # action[-1] > 0 reads "gripper closed"
+
+    monkeypatch.setattr(joint.inverse, "sample", sample)
+    joint.reset()
+    x, y, theta = OOD_POSE
+    for _ in range(2):
+        joint.select_action(observation([OOD_POSE], [[300.0, 100.0]]))
+    assert sampled == [1]
+    # the object and the end effector both moved 10 px right during that chunk: it is held
+    carried = [joint.select_action(observation([[x + 10, y, theta]], [[310.0, 100.0]]))[0] for _ in range(2)]
+    assert sampled == [1] and joint.ocr_stats()["carried_chunks"] == 1
+    step = joint.config.step_size
+    first, second = carried[0] - 150.0, carried[1] - 150.0
+    assert torch.linalg.vector_norm(first).item() == pytest.approx(step, rel=1e-4)  # moves from the first action
+    torch.testing.assert_close(second, 2 * first, atol=1e-3, rtol=0)
+    assert first[0] < 0  # toward the demos on the left
+    # the object moved again but the end effector did not: not held, the inverse policy plans
+    joint.select_action(observation([[x + 20, y, theta]], [[310.0, 100.0]]))
+    assert sampled == [1, 1] and joint.ocr_stats()["carried_chunks"] == 1

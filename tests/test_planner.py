@@ -1,7 +1,7 @@
 import pytest
 import torch
 
-from lerobot_ocr.planner import RecoveryPlanner, plan_keypoint_trajectory, recovery_delay
+from lerobot_ocr.planner import RecoveryPlanner, carry_along_plan, plan_keypoint_trajectory, recovery_delay
 
 
 def test_delay_regions():
@@ -102,3 +102,23 @@ def test_grasp_delay_replaces_the_delay_of_rows_that_hold_the_object():
     torch.testing.assert_close(off(kps, vec, dist, grasped=torch.ones(3, dtype=torch.bool))[:2], traj[[1, 1]])
     with pytest.raises(ValueError, match="grasp_delay"):
         RecoveryPlanner(horizon=8, grasp_delay=8)
+
+
+def test_explicit_delay_replaces_the_schedule():
+    planner = RecoveryPlanner(horizon=8, step_size=1.0, d_min=10.0, d_max=50.0, fixed_delay=6)
+    kps, vec, far = torch.zeros(2, 1, 2), torch.tensor([[2.0, 0.0], [0.0, 3.0]]), torch.tensor([100.0, 100.0])
+    assert planner(kps, vec, far)[:, -1, 0].tolist() == [[1.0, 0.0], [0.0, 1.0]]  # the fixed delay: 1 moving frame
+    assert planner(kps, vec, None, delay=0)[:, -1, 0].tolist() == [[7.0, 0.0], [0.0, 7.0]]  # normalised, from frame 1
+
+
+def test_carry_along_plan_shifts_the_position_and_keeps_the_rest():
+    plan = torch.zeros(1, 4, 2, 3)
+    plan[0, :, 0, 0] = torch.tensor([0.0, 1.0, 2.0, 3.0])  # keypoint 0 moves in x, keypoint 1 stays: centre 0.5 per frame
+    plan[0, :, 1, 2] = 7.0
+    last = torch.tensor([[10.0, 20.0, 30.0, 0.1, 0.2, 1.0]])  # xyz target, then rotation and gripper entries
+    out = carry_along_plan(plan, last)
+    assert out.shape == (1, 4, 6)
+    assert out[0, :, 0].tolist() == [10.5, 11.0, 11.5, 11.5]  # reaches frame t + 1, the last action holds the end
+    assert (out[0, :, 1:] == last[0, 1:]).all()
+    with pytest.raises(ValueError, match="fewer than"):
+        carry_along_plan(plan, last[:, :2])

@@ -117,17 +117,21 @@ class RecoveryPlanner:
         distance: torch.Tensor,
         chunks: torch.Tensor | None = None,
         grasped: torch.Tensor | None = None,
+        delay: torch.Tensor | int | None = None,
     ) -> torch.Tensor:
         """(B, K, D) keypoints, (B, D) or (B, K, D) recovery vectors, (B,) distances -> (B, L, K, D).
 
         chunks: (B,) recovery chunks each row has already executed since it started recovering
         (used by `delay_countdown`; None = 0).
         grasped: (B,) bool, rows whose gripper holds the object (used by `grasp_delay`; None = none).
+        delay: (B,) or scalar still frames that replace the schedule (e.g. 0 to move at once).
         """
         vec = recovery_vector
         if self.normalize:
             norm = torch.linalg.vector_norm(vec, dim=-1, keepdim=True)
             vec = vec / norm.clamp_min(torch.finfo(vec.dtype).tiny)
+        if delay is not None:
+            return plan_keypoint_trajectory(keypoints, vec, self.step_size, self.horizon, delay)
         if self.fixed_delay is None:
             delay = recovery_delay(distance, self.d_min, self.d_max, self.horizon)
         else:
@@ -139,3 +143,27 @@ class RecoveryPlanner:
             cap = (self.horizon - self.delay_countdown * torch.as_tensor(chunks, device=delay.device)).clamp_min(0)
             delay = torch.minimum(delay, cap.to(delay.dtype))
         return plan_keypoint_trajectory(keypoints, vec, self.step_size, self.horizon, delay)
+
+
+def carry_along_plan(plan: torch.Tensor, last_action: torch.Tensor) -> torch.Tensor:
+    """Actions that carry a held object along its keypoint plan: (R, L, K, D), (R, A) -> (R, L, A).
+
+    Action t is `last_action` (an absolute end-effector target whose first D entries are the world
+    position) shifted by the plan's mean keypoint displacement from frame 0 to frame t + 1 (the
+    last action reaches the last frame); rotation and gripper entries are kept, so the grip holds.
+    """
+    if plan.ndim != 4 or last_action.ndim != 2 or last_action.shape[0] != plan.shape[0]:
+        raise ValueError(
+            f"Need plan (R, L, K, D) and last_action (R, A), got {tuple(plan.shape)} and {tuple(last_action.shape)}."
+        )
+    d = plan.shape[-1]
+    if last_action.shape[1] < d:
+        raise ValueError(
+            f"The action has {last_action.shape[1]} entries, fewer than the {d}-D position it must start with."
+        )
+    centre = plan.mean(2)  # (R, L, D)
+    frame = torch.arange(1, plan.shape[1] + 1, device=plan.device).clamp_max(plan.shape[1] - 1)
+    shift = (centre[:, frame] - centre[:, :1]).to(last_action.dtype)
+    out = last_action[:, None].repeat(1, plan.shape[1], 1)
+    out[..., :d] += shift
+    return out

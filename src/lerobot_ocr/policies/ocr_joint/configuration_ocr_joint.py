@@ -62,7 +62,16 @@ class OcrJointConfig(PreTrainedConfig):
             row's previous recovery chunk closed the gripper (its `gripper_action_index` entry > 0,
             the -1 open / +1 closed convention); None = off. The reference's real-robot rule is 0:
             carry the object at once, instead of re-planning a still start at every chunk,
-        gripper_action_index: which action entry is the gripper command (used by `grasp_delay`).
+        gripper_action_index: which action entry is the gripper command (used by `grasp_delay`
+            and `carry_tolerance`).
+        carry_tolerance: prehensile tasks (object units, e.g. 0.005 m); None = off. A row whose
+            previous recovery chunk ended with the gripper closed and during which the object moved
+            (by more than this) with the end effector (their displacements differ by less) holds
+            the object: its next chunk carries it along the plan at once (delay 0) by shifting the
+            previous chunk's last action by the plan's displacement, instead of sampling the inverse
+            policy, which learned to carry objects the way the demos did (toward the goal) and
+            follows a sideways plan slowly. It needs `ee_position_start` and absolute position actions
+            whose first D entries are the end-effector target.
         n_recovery_action_steps: actions executed per recovery chunk before re-deciding.
         recovery_action_repeat: env steps each recovery action is held by `select_action`
             (absolute targets: the controller settles on each before the next; the reference's
@@ -105,6 +114,7 @@ class OcrJointConfig(PreTrainedConfig):
     delay_countdown: int = 0
     grasp_delay: int | None = None
     gripper_action_index: int = -1
+    carry_tolerance: float | None = None
     n_recovery_action_steps: int = 8
     recovery_action_repeat: int = 1
 
@@ -169,6 +179,12 @@ class OcrJointConfig(PreTrainedConfig):
             raise ValueError(f"--policy.grasp_delay must be in [0, horizon={self.horizon}) or None, got {self.grasp_delay}.")
         if self.hysteresis < 0:
             raise ValueError(f"--policy.hysteresis must be >= 0, got {self.hysteresis}.")
+        if self.carry_tolerance is not None and not self.carry_tolerance > 0:
+            raise ValueError(f"--policy.carry_tolerance must be > 0 or None, got {self.carry_tolerance}.")
+        if self.carry_tolerance is not None and self.ee_position_start is None:
+            raise ValueError(
+                "--policy.carry_tolerance needs --policy.ee_position_start (where the state holds the end effector)."
+            )
 
     @property
     def object_dim(self) -> int:
@@ -190,10 +206,12 @@ class OcrJointConfig(PreTrainedConfig):
         if ACTION not in self.output_features:
             raise ValueError("The dataset has no `action` feature.")
         action_dim = self.output_features[ACTION].shape[0]
-        if self.grasp_delay is not None and not -action_dim <= self.gripper_action_index < action_dim:
+        uses_gripper = self.grasp_delay is not None or self.carry_tolerance is not None
+        if uses_gripper and not -action_dim <= self.gripper_action_index < action_dim:
             raise ValueError(
                 f"--policy.gripper_action_index={self.gripper_action_index} is outside the {action_dim}-D action; "
-                "point it at the gripper command, or leave --policy.grasp_delay unset for a task without a gripper."
+                "point it at the gripper command, or leave --policy.grasp_delay and --policy.carry_tolerance unset "
+                "for a task without a gripper."
             )
         size = self.input_features[self.object_pose_key].shape[-1]
         if size != pose_size(self.pose_rotation):

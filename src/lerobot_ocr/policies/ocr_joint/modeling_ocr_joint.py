@@ -39,7 +39,7 @@ from lerobot_ocr.geometry import pose_to_matrix
 from lerobot_ocr.inverse_policy import KeypointInversePolicy
 from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
 from lerobot_ocr.manifold import KeypointManifold
-from lerobot_ocr.planner import RecoveryPlanner
+from lerobot_ocr.planner import RecoveryPlanner, carry_along_plan
 from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
 
 BASE_DIR = "base"
@@ -247,6 +247,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._modes: list[torch.Tensor] = []
         self._n_chunks = 0
         self._n_handbacks = 0
+        self._n_carried = 0
 
     def _init_rows(self, b: int, action_dim: int, device) -> None:
         self._batch_size = b
@@ -256,6 +257,10 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._rec_actions = torch.zeros(b, n, action_dim, device=device)
         self._rec_left = torch.zeros(b, dtype=torch.long, device=device)
         self._rec_count = torch.zeros(b, dtype=torch.long, device=device)  # chunks since the row entered recovery
+        d = self.config.object_dim
+        # end effector and object centre when the row's current recovery chunk began (`carry_tolerance`)
+        self._chunk_ee = torch.zeros(b, d, device=device)
+        self._chunk_centre = torch.zeros(b, d, device=device)
 
     def _observation(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         cfg = self.config
@@ -288,11 +293,15 @@ class OcrJointPolicy(PreTrainedPolicy):
         noise: torch.Tensor | None = None,
         chunks: torch.Tensor | None = None,
         grasped: torch.Tensor | None = None,
+        carrying: torch.Tensor | None = None,
+        last_action: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Plan and sample one recovery chunk per row: world actions (R, L, A) and the plan (R, L, K, D).
 
         chunks: (R,) chunks each row already executed in this recovery (for `delay_countdown`).
         grasped: (R,) bool, rows whose gripper holds the object (for `grasp_delay`).
+        carrying: (R,) bool, rows that carry the object along a plan that moves at once, shifting
+            their `last_action` (R, A) instead of sampling the inverse policy (`carry_tolerance`).
         """
         cfg = self.config
         out = self.manifold.recovery(keypoints.double(), magnitude=cfg.magnitude)
@@ -301,8 +310,30 @@ class OcrJointPolicy(PreTrainedPolicy):
         if bool(weak.any()):  # deficit 0 on every keypoint yet OOD on average: fall back to the paper's direction
             vector = vector.clone()
             vector[weak] = self.manifold.recovery(keypoints[weak].double(), magnitude="paper").vector
-        plan = self.planner(keypoints, vector.to(keypoints.dtype), self._distance(state, keypoints), chunks, grasped)
-        return self.inverse.sample(plan, state, frames, noise=noise), plan
+        vector = vector.to(keypoints.dtype)
+        plan = self.planner(keypoints, vector, self._distance(state, keypoints), chunks, grasped)
+        if carrying is None or not bool(carrying.any()):
+            return self.inverse.sample(plan, state, frames, noise=noise), plan
+        carry = carrying.to(plan.device)
+        plan[carry] = self.planner(keypoints[carry], vector[carry], None, delay=0)
+        actions = carry_along_plan(plan[carry], last_action[carry].to(plan.device, torch.float32))
+        actions = actions.new_zeros(plan.shape[0], *actions.shape[1:]).index_put_((carry,), actions)
+        if bool((~carry).any()):
+            rest = ~carry
+            rest_noise = None if noise is None else noise[rest]
+            sampled = self.inverse.sample(plan[rest], state[rest], frames[rest], noise=rest_noise)
+            actions[rest] = sampled.to(actions.dtype)
+        return actions, plan
+
+    def _carrying(
+        self, rows: torch.Tensor, grasped: torch.Tensor, state: torch.Tensor, keypoints: torch.Tensor
+    ) -> torch.Tensor:
+        """(R,) bool: rows whose gripper is closed and whose object moved with the end effector last chunk."""
+        tol = self.config.carry_tolerance
+        ee = state[:, self.config.ee_position_start : self.config.ee_position_start + keypoints.shape[-1]]
+        moved = keypoints.mean(1) - self._chunk_centre[rows]
+        with_ee = torch.linalg.vector_norm(moved - (ee - self._chunk_ee[rows]), dim=-1) < tol
+        return grasped & (torch.linalg.vector_norm(moved, dim=-1) > tol) & with_ee
 
     def _base_action(self, batch: dict[str, torch.Tensor], rows_on_base: torch.Tensor) -> torch.Tensor | None:
         base_batch = self._base_pre(dict(batch))
@@ -351,9 +382,18 @@ class OcrJointPolicy(PreTrainedPolicy):
             rows = need_chunk.nonzero().squeeze(-1)
             # Holding the object = this recovery's previous chunk ended with a close command.
             grasped = (self._rec_count[rows] > 0) & (self._rec_actions[rows, -1, cfg.gripper_action_index] > 0)
+            carrying = None
+            if cfg.carry_tolerance is not None:
+                carrying = self._carrying(rows, grasped, state[rows], keypoints[rows])
+                start = cfg.ee_position_start
+                self._chunk_ee[rows] = state[rows, start : start + keypoints.shape[-1]]
+                self._chunk_centre[rows] = keypoints[rows].mean(1)
             actions, _ = self.recovery_actions(
-                frames[rows], keypoints[rows], state[rows], noise=noise, chunks=self._rec_count[rows], grasped=grasped
-            )
+                frames[rows], keypoints[rows], state[rows], noise=noise, chunks=self._rec_count[rows], grasped=grasped,
+                carrying=carrying, last_action=self._rec_actions[rows, -1],
+            )  # fmt: skip
+            if carrying is not None:
+                self._n_carried += int(carrying.sum())
             self._rec_count[rows] += 1
             chunk = actions[:, : cfg.n_recovery_action_steps].repeat_interleave(cfg.recovery_action_repeat, dim=1)
             self._rec_actions[rows] = chunk.to(self._rec_actions.dtype)
@@ -407,6 +447,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             "mean_recovery_fraction": float(modes.mean()),
             "recovery_chunks": self._n_chunks,
             "handbacks": self._n_handbacks,
+            "carried_chunks": self._n_carried,
             "score": scores,
             "in_recovery": modes,
         }

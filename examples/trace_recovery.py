@@ -23,8 +23,8 @@ from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
 def main(args: list[str]) -> None:
     original = OcrJointPolicy.recovery_actions
 
-    def traced(self, frames, keypoints, state, noise=None, chunks=None, grasped=None):
-        actions, plan = original(self, frames, keypoints, state, noise, chunks, grasped)
+    def traced(self, frames, keypoints, state, *args, **kwargs):
+        actions, plan = original(self, frames, keypoints, state, *args, **kwargs)
         d = keypoints.shape[-1]
         still = (plan[0] - plan[0, :1]).norm(dim=-1).mean(-1) <= 1e-9
         row = {

@@ -345,3 +345,24 @@ def test_a_held_object_is_carried_along_the_plan(diffusion_base, converted_datas
     # the object moved again but the end effector did not: not held, the inverse policy plans
     joint.select_action(observation([[x + 20, y, theta]], [[310.0, 100.0]]))
     assert sampled == [1, 1] and joint.ocr_stats()["carried_chunks"] == 1
+
+
+def test_a_stuck_row_on_the_base_gets_one_recovery_chunk(diffusion_base, converted_dataset, id_pose, monkeypatch):
+    """--policy.stall_steps: in distribution, but the object has not moved for `stall_steps` steps:
+    at the end of the base's chunk the row gets a recovery chunk, then hands back."""
+    joint = make_joint(
+        diffusion_base, converted_dataset, n_recovery_action_steps=1, stall_steps=3, stall_tolerance=1.0
+    )
+    marker = torch.full((1, TINY_OCR["horizon"], 2), 123.0)
+    monkeypatch.setattr(joint.inverse, "sample", lambda plan, state, frames, noise=None: marker.expand(len(plan), -1, -1))
+    n = joint.base.config.n_action_steps  # 4: the stall (step 3) is acted on when the base's chunk ends
+    x, y, theta = id_pose
+    joint.reset()  # the end effector moves, the object does not
+    actions = [joint.select_action(observation([id_pose], [[200.0 + 5 * i, 200.0]]))[0] for i in range(n + 2)]
+    stats = joint.ocr_stats()
+    assert stats["in_recovery"][:, 0].tolist() == [False] * n + [True, False]  # one chunk, then back on the base
+    assert actions[n].tolist() == [123.0, 123.0] and stats["stalls"] == 1
+    joint.reset()  # an object that keeps moving (2 px back and forth, in distribution) is never stuck
+    for i in range(3 * n):
+        joint.select_action(observation([[x + 2 * (i % 2), y, theta]], [[200.0, 200.0]]))
+    assert not joint.ocr_stats()["in_recovery"].any() and joint.ocr_stats()["stalls"] == 0

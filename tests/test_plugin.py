@@ -90,3 +90,9 @@ def test_config_rejects_bad_recovery_settings():
         OcrJointConfig(device="cpu", delay_countdown=-1)
     with pytest.raises(ValueError, match="grasp_delay must be in"):
         OcrJointConfig(device="cpu", grasp_delay=-1)
+    with pytest.raises(ValueError, match="carry_tolerance needs --policy.ee_position_start"):
+        OcrJointConfig(device="cpu", carry_tolerance=0.005, ee_position_start=None)
+    with pytest.raises(ValueError, match="stall_steps must be >= 1"):
+        OcrJointConfig(device="cpu", stall_steps=0, stall_tolerance=1.0)
+    with pytest.raises(ValueError, match="stall_steps needs --policy.stall_tolerance > 0"):
+        OcrJointConfig(device="cpu", stall_steps=24)

@@ -3,8 +3,8 @@
 Runs LeRobot's own eval in-process with the arguments given (`--policy.path=… --env.type=… …`).
 When the policy is `ocr_joint`, its per-batch `ocr_stats()` are collected and written to
 `<output_dir>/ocr_stats.json` (mean fraction of steps in recovery, recovery chunks, hand-backs, carried
-chunks, and per episode whether the switch flagged its first observation, so that successes split by
-where they started).
+chunks, stalls broken, and per episode whether the switch flagged its first observation, so that
+successes split by where they started).
 """
 
 from __future__ import annotations
@@ -104,6 +104,7 @@ def run_eval(args: list[str]) -> dict:
             "recovery_chunks": sum(b["recovery_chunks"] for b in batches),
             "handbacks": sum(b["handbacks"] for b in batches),
             "carried_chunks": sum(b.get("carried_chunks", 0) for b in batches),
+            "stalls": sum(b.get("stalls", 0) for b in batches),
             "threshold": batches[0]["threshold"] if batches else None,
             # per episode, in eval_info's order (batches run one after another, rows in env order)
             "started_ood": [bool(f) for b in batches for f in b["started_ood"]],

@@ -50,6 +50,12 @@ class OcrJointConfig(PreTrainedConfig):
         latch: never recover again once the base has taken over (the reference Push-T eval).
         check_every_step: rows on the base are checked at every step instead of at the end of
             each base chunk (the paper's rule, and near-free: ~0.3 ms per check on CPU).
+        stall_steps / stall_tolerance: a row on the base whose object keypoints have all stayed
+            within `stall_tolerance` (object units) for `stall_steps` env steps is stuck (a low-dim
+            base can hover next to the object for hundreds of steps): it gets one recovery chunk
+            toward higher density, in or out of distribution, then the usual hand-back test.
+            None = off. It ignores `latch`. Pick stall_steps above the demos' longest still-object
+            stretch (the Push-T expert: 54 steps at 1 px, 62 at 2 px, 67 at 3 px).
     Recovery
         magnitude: recovery vector magnitude, "log_deficit" (ours) or "paper" (q(|grad p|)).
         step_size (alpha, object units per frame), horizon (L), d_min / d_max (delay ramp),
@@ -103,6 +109,8 @@ class OcrJointConfig(PreTrainedConfig):
     hysteresis: float = 0.0
     latch: bool = False
     check_every_step: bool = False
+    stall_steps: int | None = None
+    stall_tolerance: float | None = None
 
     # Recovery vector and planner.
     magnitude: str = "log_deficit"
@@ -179,6 +187,14 @@ class OcrJointConfig(PreTrainedConfig):
             raise ValueError(f"--policy.grasp_delay must be in [0, horizon={self.horizon}) or None, got {self.grasp_delay}.")
         if self.hysteresis < 0:
             raise ValueError(f"--policy.hysteresis must be >= 0, got {self.hysteresis}.")
+        if self.stall_steps is not None:
+            if self.stall_steps < 1:
+                raise ValueError(f"--policy.stall_steps must be >= 1 or None, got {self.stall_steps}.")
+            if self.stall_tolerance is None or not self.stall_tolerance > 0:
+                raise ValueError(
+                    "--policy.stall_steps needs --policy.stall_tolerance > 0 (how far, in object units, the object's "
+                    f"keypoints may drift and still count as stuck), got {self.stall_tolerance}."
+                )
         if self.carry_tolerance is not None and not self.carry_tolerance > 0:
             raise ValueError(f"--policy.carry_tolerance must be > 0 or None, got {self.carry_tolerance}.")
         if self.carry_tolerance is not None and self.ee_position_start is None:

@@ -248,6 +248,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._n_chunks = 0
         self._n_handbacks = 0
         self._n_carried = 0
+        self._n_stalls = 0
 
     def _init_rows(self, b: int, action_dim: int, device) -> None:
         self._batch_size = b
@@ -261,6 +262,9 @@ class OcrJointPolicy(PreTrainedPolicy):
         # end effector and object centre when the row's current recovery chunk began (`carry_tolerance`)
         self._chunk_ee = torch.zeros(b, d, device=device)
         self._chunk_centre = torch.zeros(b, d, device=device)
+        # the object's keypoints when each row's object last moved, and env steps since (`stall_steps`)
+        self._still_keypoints: torch.Tensor | None = None  # (B, K, D), set at the first check
+        self._still_steps = torch.zeros(b, dtype=torch.long, device=device)
 
     def _observation(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         cfg = self.config
@@ -335,6 +339,23 @@ class OcrJointPolicy(PreTrainedPolicy):
         with_ee = torch.linalg.vector_norm(moved - (ee - self._chunk_ee[rows]), dim=-1) < tol
         return grasped & (torch.linalg.vector_norm(moved, dim=-1) > tol) & with_ee
 
+    def _stalled(self, keypoints: torch.Tensor) -> torch.Tensor:
+        """(B,) bool: rows on the base whose object has stayed put for `stall_steps` env steps.
+
+        keypoints: (B, K, D) world frame. Counts this step: a row whose keypoints moved more than
+        `stall_tolerance` from where they last moved, or that is recovering, restarts its count.
+        """
+        cfg = self.config
+        if cfg.stall_steps is None:
+            return torch.zeros(keypoints.shape[0], dtype=torch.bool, device=keypoints.device)
+        if self._still_keypoints is None:
+            self._still_keypoints = torch.full_like(keypoints, float("nan"))
+        drift = torch.linalg.vector_norm(keypoints - self._still_keypoints, dim=-1).amax(-1)
+        moved = ~(drift <= cfg.stall_tolerance) | self._recovering  # NaN anchors (first step) count as moved
+        self._still_keypoints[moved] = keypoints[moved]
+        self._still_steps = torch.where(moved, torch.zeros_like(self._still_steps), self._still_steps + 1)
+        return self._still_steps >= cfg.stall_steps
+
     def _base_action(self, batch: dict[str, torch.Tensor], rows_on_base: torch.Tensor) -> torch.Tensor | None:
         base_batch = self._base_pre(dict(batch))
         if bool(rows_on_base.any()):
@@ -353,6 +374,8 @@ class OcrJointPolicy(PreTrainedPolicy):
             and not self._any_recovering
             and (queued_actions(self.base) or 0) > 0
         ):  # every row is inside a base chunk: decisions wait for its end (as the paper's joint policy)
+            if cfg.stall_steps is not None:  # stalls still count every step
+                self._stalled(self._observation(batch)[1])
             self._record(torch.full((self._batch_size,), float("nan")), self._recovering)
             return self._base_post(self.base.select_action(self._base_pre(dict(batch))))
         frames, keypoints, state = self._observation(batch)
@@ -363,7 +386,8 @@ class OcrJointPolicy(PreTrainedPolicy):
         score = self.manifold.score(keypoints.double()).to(device)
         threshold = float(self.manifold.threshold_)
         ood = score < threshold
-        if not (self._any_recovering or bool(ood.any())):  # every row on the base, in distribution
+        stalled = self._stalled(keypoints)
+        if not (self._any_recovering or bool(ood.any()) or bool(stalled.any())):  # all on the base, in distribution
             self._record(score, self._recovering)
             return self._base_post(self.base.select_action(self._base_pre(dict(batch)))).to(device)
 
@@ -372,10 +396,13 @@ class OcrJointPolicy(PreTrainedPolicy):
         handback = done_chunk & (score >= threshold + cfg.hysteresis)
         self._recovering = self._recovering & ~handback  # new tensors: the history keeps the old ones
         self._returned |= handback
-        # Rows on the base that left the distribution start recovering (unless latched).
-        enter = ~self._recovering & ood & ~(self._returned & cfg.latch)
+        # Rows on the base that left the distribution start recovering (unless latched), and stuck ones.
+        unstick = ~self._recovering & stalled
+        enter = ~self._recovering & ((ood & ~(self._returned & cfg.latch)) | unstick)
         self._recovering = self._recovering | enter
         self._rec_count[enter] = 0
+        self._still_steps[unstick] = 0
+        self._n_stalls += int(unstick.sum())
         need_chunk = self._recovering & (self._rec_left == 0)
 
         if bool(need_chunk.any()):
@@ -448,6 +475,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             "recovery_chunks": self._n_chunks,
             "handbacks": self._n_handbacks,
             "carried_chunks": self._n_carried,
+            "stalls": self._n_stalls,
             "score": scores,
             "in_recovery": modes,
         }

@@ -107,8 +107,8 @@ def test_delay_countdown_counts_chunks_per_recovery(diffusion_base, converted_da
         diffusion_base, converted_dataset, n_recovery_action_steps=1, check_every_step=True, delay_countdown=8
     )
     seen, planner = [], joint.planner
-    joint.planner = lambda kps, vec, dist, chunks=None, grasped=None: (
-        seen.append(chunks.tolist()) or planner(kps, vec, dist, chunks, grasped)
+    joint.planner = lambda kps, vec, dist, chunks=None, grasped=None, **kw: (
+        seen.append(chunks.tolist()) or planner(kps, vec, dist, chunks, grasped, **kw)
     )
     joint.reset()
     far = [[20.0, 480.0]]  # the agent far from the T: the ramp alone would hold the plan still
@@ -129,8 +129,8 @@ def test_grasp_delay_follows_the_previous_chunks_last_gripper_command(diffusion_
         gripper_action_index=1,
     )
     seen, planner = [], joint.planner
-    joint.planner = lambda kps, vec, dist, chunks=None, grasped=None: (
-        seen.append(grasped.tolist()) or planner(kps, vec, dist, chunks, grasped)
+    joint.planner = lambda kps, vec, dist, chunks=None, grasped=None, **kw: (
+        seen.append(grasped.tolist()) or planner(kps, vec, dist, chunks, grasped, **kw)
     )
     horizon = TINY_OCR["horizon"]
     # Chunk i's actions: (x, gripper); the second executed action (index 1) is the chunk's last.
@@ -153,6 +153,41 @@ def test_grasp_delay_follows_the_previous_chunks_last_gripper_command(diffusion_
     ].abs().sum() > 0  # grasp_delay 0: the held object moves from frame 1 even though the robot is "far"
     with pytest.raises(ValueError, match="gripper_action_index"):
         make_joint(diffusion_base, converted_dataset, grasp_delay=0, gripper_action_index=2)
+
+
+def test_follow_delay_keeps_a_working_push_going(diffusion_base, converted_dataset, monkeypatch):
+    """--policy.follow_delay: a row whose last recovery chunk moved the object along its plan (by at
+    least follow_fraction of the planned shift) plans with the capped delay; a stalled one does not."""
+    joint = make_joint(
+        diffusion_base, converted_dataset, n_recovery_action_steps=1, check_every_step=True, fixed_delay=12,
+        follow_delay=0, follow_fraction=0.5,
+    )
+    marker = torch.zeros(1, TINY_OCR["horizon"], 2)
+    monkeypatch.setattr(joint.inverse, "sample", lambda plan, state, frames, noise=None: marker.expand(len(plan), -1, -1))
+    seen, plans, planner = [], [], joint.planner
+
+    def spy(kps, vec, dist, chunks=None, grasped=None, following=None, **kw):
+        seen.append(None if following is None else following.tolist())
+        plans.append(planner(kps, vec, dist, chunks, grasped, following=following, **kw))
+        return plans[-1]
+
+    joint.planner = spy
+    x, y, theta = OOD_POSE
+    joint.reset()
+    joint.select_action(observation([OOD_POSE, OOD_POSE]))  # chunk 1: nothing to follow yet, delay 12
+    assert seen == [[False, False]] and plans[0][:, 1].equal(plans[0][:, 0])
+    # Chunk 1's plan still holds the object at its first executed frame: nothing to follow.
+    joint.select_action(observation([OOD_POSE, OOD_POSE]))
+    assert seen[-1] == [False, False]
+    joint._chunk_shift[:] = torch.tensor([-10.0, 0.0])  # as if the last chunk planned 10 px to the left
+    moved = [[x - 6.0, y, theta], [x - 4.0, y + 30.0, theta]]  # 60% of the shift / 40% and sideways
+    joint.select_action(observation(moved))
+    assert seen[-1] == [True, False] and joint.ocr_stats()["followed_chunks"] == 1
+    assert not plans[-1][0, 1].equal(plans[-1][0, 0]) and plans[-1][1, 1].equal(plans[-1][1, 0])  # delay 0 vs 12
+    with pytest.raises(ValueError, match="follow_delay must be in"):
+        make_joint(diffusion_base, converted_dataset, follow_delay=16)
+    with pytest.raises(ValueError, match="follow_fraction must be > 0"):
+        make_joint(diffusion_base, converted_dataset, follow_fraction=0.0)
 
 
 def test_base_history_stays_right_through_a_recovery(diffusion_base, converted_dataset, id_pose):

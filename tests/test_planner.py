@@ -104,6 +104,19 @@ def test_grasp_delay_replaces_the_delay_of_rows_that_hold_the_object():
         RecoveryPlanner(horizon=8, grasp_delay=8)
 
 
+def test_follow_delay_caps_the_delay_of_rows_that_follow_their_plan():
+    """A following row uses at most follow_delay still frames; others keep the schedule's delay."""
+    planner = RecoveryPlanner(horizon=8, step_size=1.0, fixed_delay=6, follow_delay=2)
+    kps, vec = torch.zeros(3, 1, 2), torch.tensor([[1.0, 0.0]]).expand(3, -1)
+    traj = planner(kps, vec, None, following=torch.tensor([True, False, True]))
+    assert traj[:, -1, 0, 0].tolist() == [5.0, 1.0, 5.0]  # moving frames = L - 1 - delay: delays 2, 6, 2
+    assert planner(kps, vec, None)[:, -1, 0, 0].tolist() == [1.0] * 3  # following unknown: the schedule
+    low = RecoveryPlanner(horizon=8, step_size=1.0, fixed_delay=1, follow_delay=2)
+    assert low(kps, vec, None, following=torch.ones(3, dtype=torch.bool))[:, -1, 0, 0].tolist() == [6.0] * 3  # a cap
+    with pytest.raises(ValueError, match="follow_delay"):
+        RecoveryPlanner(horizon=8, follow_delay=8)
+
+
 def test_explicit_delay_replaces_the_schedule():
     planner = RecoveryPlanner(horizon=8, step_size=1.0, d_min=10.0, d_max=50.0, fixed_delay=6)
     kps, vec, far = torch.zeros(2, 1, 2), torch.tensor([[2.0, 0.0], [0.0, 3.0]]), torch.tensor([100.0, 100.0])

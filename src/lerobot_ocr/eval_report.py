@@ -3,7 +3,7 @@
 Runs LeRobot's own eval in-process with the arguments given (`--policy.path=… --env.type=… …`).
 When the policy is `ocr_joint`, its per-batch `ocr_stats()` are collected and written to
 `<output_dir>/ocr_stats.json` (mean fraction of steps in recovery, recovery chunks, hand-backs, carried
-chunks, stalls broken, and per episode whether the switch flagged its first observation, so that
+chunks, chunks that followed a working push, stalls broken, and per episode whether the switch flagged its first observation, so that
 successes split by where they started).
 """
 
@@ -105,6 +105,7 @@ def run_eval(args: list[str]) -> dict:
             "handbacks": sum(b["handbacks"] for b in batches),
             "carried_chunks": sum(b.get("carried_chunks", 0) for b in batches),
             "stalls": sum(b.get("stalls", 0) for b in batches),
+            "followed_chunks": sum(b.get("followed_chunks", 0) for b in batches),
             "threshold": batches[0]["threshold"] if batches else None,
             # per episode, in eval_info's order (batches run one after another, rows in env order)
             "started_ood": [bool(f) for b in batches for f in b["started_ood"]],

@@ -91,6 +91,9 @@ class RecoveryPlanner:
     grasp_delay: the delay for rows whose gripper holds the object (`grasped`), whatever the
     distance; None = off. The reference's real robot uses 0 once the gripper is closed: a held
     object moves from frame 1 instead of every chunk restarting with still frames.
+    follow_delay: the delay's upper bound for rows that are `following` their plan (their previous
+    chunk moved the object along it: the robot is already at the object, pushing it the planned
+    way), so a recovery that works keeps pushing instead of waiting again; None = off.
     """
 
     horizon: int = 16
@@ -101,6 +104,7 @@ class RecoveryPlanner:
     fixed_delay: int | None = None
     delay_countdown: int = 0
     grasp_delay: int | None = None
+    follow_delay: int | None = None
 
     def __post_init__(self):
         if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:
@@ -109,6 +113,8 @@ class RecoveryPlanner:
             raise ValueError(f"delay_countdown must be >= 0, got {self.delay_countdown}.")
         if self.grasp_delay is not None and not 0 <= self.grasp_delay < self.horizon:
             raise ValueError(f"grasp_delay must be in [0, horizon={self.horizon}), got {self.grasp_delay}.")
+        if self.follow_delay is not None and not 0 <= self.follow_delay < self.horizon:
+            raise ValueError(f"follow_delay must be in [0, horizon={self.horizon}), got {self.follow_delay}.")
 
     def __call__(
         self,
@@ -118,6 +124,7 @@ class RecoveryPlanner:
         chunks: torch.Tensor | None = None,
         grasped: torch.Tensor | None = None,
         delay: torch.Tensor | int | None = None,
+        following: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """(B, K, D) keypoints, (B, D) or (B, K, D) recovery vectors, (B,) distances -> (B, L, K, D).
 
@@ -125,6 +132,8 @@ class RecoveryPlanner:
         (used by `delay_countdown`; None = 0).
         grasped: (B,) bool, rows whose gripper holds the object (used by `grasp_delay`; None = none).
         delay: (B,) or scalar still frames that replace the schedule (e.g. 0 to move at once).
+        following: (B,) bool, rows whose previous chunk moved the object along its plan (used by
+            `follow_delay`; None = none).
         """
         vec = recovery_vector
         if self.normalize:
@@ -139,6 +148,9 @@ class RecoveryPlanner:
         if self.grasp_delay is not None and grasped is not None:
             held = torch.as_tensor(grasped, dtype=torch.bool, device=delay.device)
             delay = torch.where(held, torch.full_like(delay, self.grasp_delay), delay)
+        if self.follow_delay is not None and following is not None:
+            on_plan = torch.as_tensor(following, dtype=torch.bool, device=delay.device)
+            delay = torch.where(on_plan, delay.clamp_max(self.follow_delay), delay)
         if self.delay_countdown and chunks is not None:
             cap = (self.horizon - self.delay_countdown * torch.as_tensor(chunks, device=delay.device)).clamp_min(0)
             delay = torch.minimum(delay, cap.to(delay.dtype))

@@ -68,6 +68,11 @@ class OcrJointConfig(PreTrainedConfig):
             row's previous recovery chunk closed the gripper (its `gripper_action_index` entry > 0,
             the -1 open / +1 closed convention); None = off. The reference's real-robot rule is 0:
             carry the object at once, instead of re-planning a still start at every chunk,
+        follow_delay / follow_fraction: the delay's upper bound for a row whose previous recovery
+            chunk moved the object along its plan: the object's keypoint centre moved, in the
+            plan's direction, by at least `follow_fraction` of the planned shift. The robot is then
+            already at the object pushing it the planned way, so it keeps pushing instead of holding
+            still again (the non-prehensile analogue of `grasp_delay`); None = off.
         gripper_action_index: which action entry is the gripper command (used by `grasp_delay`
             and `carry_tolerance`).
         carry_tolerance: prehensile tasks (object units, e.g. 0.005 m); None = off. A row whose
@@ -121,6 +126,8 @@ class OcrJointConfig(PreTrainedConfig):
     fixed_delay: int | None = None
     delay_countdown: int = 0
     grasp_delay: int | None = None
+    follow_delay: int | None = None
+    follow_fraction: float = 0.5
     gripper_action_index: int = -1
     carry_tolerance: float | None = None
     n_recovery_action_steps: int = 8
@@ -185,6 +192,10 @@ class OcrJointConfig(PreTrainedConfig):
             raise ValueError(f"--policy.delay_countdown must be >= 0, got {self.delay_countdown}.")
         if self.grasp_delay is not None and not 0 <= self.grasp_delay < self.horizon:
             raise ValueError(f"--policy.grasp_delay must be in [0, horizon={self.horizon}) or None, got {self.grasp_delay}.")
+        if self.follow_delay is not None and not 0 <= self.follow_delay < self.horizon:
+            raise ValueError(f"--policy.follow_delay must be in [0, horizon={self.horizon}) or None, got {self.follow_delay}.")
+        if not self.follow_fraction > 0:
+            raise ValueError(f"--policy.follow_fraction must be > 0 (share of the planned shift), got {self.follow_fraction}.")
         if self.hysteresis < 0:
             raise ValueError(f"--policy.hysteresis must be >= 0, got {self.hysteresis}.")
         if self.stall_steps is not None:

@@ -115,6 +115,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         self.planner = RecoveryPlanner(
             horizon=config.horizon, step_size=config.step_size, d_min=config.d_min, d_max=config.d_max, normalize=True,
             fixed_delay=config.fixed_delay, delay_countdown=config.delay_countdown, grasp_delay=config.grasp_delay,
+            follow_delay=config.follow_delay,
         )  # fmt: skip
 
         bundled = Path(bundle_dir) / BASE_DIR if bundle_dir is not None else None
@@ -249,6 +250,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._n_handbacks = 0
         self._n_carried = 0
         self._n_stalls = 0
+        self._n_followed = 0
 
     def _init_rows(self, b: int, action_dim: int, device) -> None:
         self._batch_size = b
@@ -259,9 +261,11 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._rec_left = torch.zeros(b, dtype=torch.long, device=device)
         self._rec_count = torch.zeros(b, dtype=torch.long, device=device)  # chunks since the row entered recovery
         d = self.config.object_dim
-        # end effector and object centre when the row's current recovery chunk began (`carry_tolerance`)
+        # end effector and object centre when the row's current recovery chunk began (`carry_tolerance`,
+        # `follow_delay`), and the object centre's planned shift over that chunk
         self._chunk_ee = torch.zeros(b, d, device=device)
         self._chunk_centre = torch.zeros(b, d, device=device)
+        self._chunk_shift = torch.zeros(b, d, device=device)
         # the object's keypoints when each row's object last moved, and env steps since (`stall_steps`)
         self._still_keypoints: torch.Tensor | None = None  # (B, K, D), set at the first check
         self._still_steps = torch.zeros(b, dtype=torch.long, device=device)
@@ -299,6 +303,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         grasped: torch.Tensor | None = None,
         carrying: torch.Tensor | None = None,
         last_action: torch.Tensor | None = None,
+        following: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Plan and sample one recovery chunk per row: world actions (R, L, A) and the plan (R, L, K, D).
 
@@ -306,6 +311,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         grasped: (R,) bool, rows whose gripper holds the object (for `grasp_delay`).
         carrying: (R,) bool, rows that carry the object along a plan that moves at once, shifting
             their `last_action` (R, A) instead of sampling the inverse policy (`carry_tolerance`).
+        following: (R,) bool, rows whose previous chunk moved the object along its plan (`follow_delay`).
         """
         cfg = self.config
         out = self.manifold.recovery(keypoints.double(), magnitude=cfg.magnitude)
@@ -315,7 +321,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             vector = vector.clone()
             vector[weak] = self.manifold.recovery(keypoints[weak].double(), magnitude="paper").vector
         vector = vector.to(keypoints.dtype)
-        plan = self.planner(keypoints, vector, self._distance(state, keypoints), chunks, grasped)
+        plan = self.planner(keypoints, vector, self._distance(state, keypoints), chunks, grasped, following=following)
         if carrying is None or not bool(carrying.any()):
             return self.inverse.sample(plan, state, frames, noise=noise), plan
         carry = carrying.to(plan.device)
@@ -338,6 +344,17 @@ class OcrJointPolicy(PreTrainedPolicy):
         moved = keypoints.mean(1) - self._chunk_centre[rows]
         with_ee = torch.linalg.vector_norm(moved - (ee - self._chunk_ee[rows]), dim=-1) < tol
         return grasped & (torch.linalg.vector_norm(moved, dim=-1) > tol) & with_ee
+
+    def _following(self, rows: torch.Tensor, keypoints: torch.Tensor) -> torch.Tensor:
+        """(R,) bool: rows whose last recovery chunk moved the object centre along its planned shift.
+
+        keypoints: (R, K, D) world frame, now. Progress is the move's projection on the planned shift,
+        as a share of it; it must reach `follow_fraction` (a plan that holds still is never followed).
+        """
+        shift = self._chunk_shift[rows]
+        planned = (shift * shift).sum(-1)
+        progress = ((keypoints.mean(1) - self._chunk_centre[rows]) * shift).sum(-1)
+        return (self._rec_count[rows] > 0) & (planned > 0) & (progress >= self.config.follow_fraction * planned)
 
     def _stalled(self, keypoints: torch.Tensor) -> torch.Tensor:
         """(B,) bool: rows on the base whose object has stayed put for `stall_steps` env steps.
@@ -409,18 +426,25 @@ class OcrJointPolicy(PreTrainedPolicy):
             rows = need_chunk.nonzero().squeeze(-1)
             # Holding the object = this recovery's previous chunk ended with a close command.
             grasped = (self._rec_count[rows] > 0) & (self._rec_actions[rows, -1, cfg.gripper_action_index] > 0)
-            carrying = None
+            carrying = following = None
             if cfg.carry_tolerance is not None:
                 carrying = self._carrying(rows, grasped, state[rows], keypoints[rows])
                 start = cfg.ee_position_start
                 self._chunk_ee[rows] = state[rows, start : start + keypoints.shape[-1]]
-                self._chunk_centre[rows] = keypoints[rows].mean(1)
-            actions, _ = self.recovery_actions(
+            if cfg.follow_delay is not None:
+                following = self._following(rows, keypoints[rows])
+            self._chunk_centre[rows] = keypoints[rows].mean(1)
+            actions, plan = self.recovery_actions(
                 frames[rows], keypoints[rows], state[rows], noise=noise, chunks=self._rec_count[rows], grasped=grasped,
-                carrying=carrying, last_action=self._rec_actions[rows, -1],
+                carrying=carrying, last_action=self._rec_actions[rows, -1], following=following,
             )  # fmt: skip
+            # the centre's planned shift over the executed actions (frame n, as the last one reaches it)
+            executed = min(cfg.n_recovery_action_steps, plan.shape[1] - 1)
+            self._chunk_shift[rows] = (plan[:, executed] - plan[:, 0]).mean(1).to(self._chunk_shift.dtype)
             if carrying is not None:
                 self._n_carried += int(carrying.sum())
+            if following is not None:
+                self._n_followed += int(following.sum())
             self._rec_count[rows] += 1
             chunk = actions[:, : cfg.n_recovery_action_steps].repeat_interleave(cfg.recovery_action_repeat, dim=1)
             self._rec_actions[rows] = chunk.to(self._rec_actions.dtype)
@@ -476,6 +500,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             "handbacks": self._n_handbacks,
             "carried_chunks": self._n_carried,
             "stalls": self._n_stalls,
+            "followed_chunks": self._n_followed,
             "score": scores,
             "in_recovery": modes,
         }

@@ -38,3 +38,27 @@ def test_successes_split_by_where_episodes_started():
         "2 started on the base: 1 succeeded (0.50)"
     )
     assert "started_ood" not in summarize(info, {"mean_recovery_fraction": 0.4, "started_ood": [True]})
+
+
+def test_how_recovery_first_episodes_ended():
+    from lerobot_ocr.eval_report import first_base_steps
+
+    # (T=4 steps, B=4 rows): row 0 handed back at step 2; row 1 never; row 2 at step 1, then recovering
+    # again; row 3 on the base from step 0
+    modes = [[True, True, True, False], [True, True, False, False], [False, True, True, False], [False, True, True, False]]
+    assert first_base_steps(modes) == [2, -1, 1, 0]
+    info = {
+        "per_task": [{"metrics": {"successes": [False, False, False, True]}}],
+        "overall": {"avg_max_reward": 0.6, "eval_s": 1.0},
+    }
+    ocr = {
+        "mean_recovery_fraction": 0.5, "started_ood": modes[0],
+        "first_base_step": first_base_steps(modes), "ended_in_recovery": modes[-1],
+    }  # fmt: skip
+    flagged = summarize(info, ocr)["started_ood"]
+    assert (flagged["failed_never_handed_back"], flagged["failed_in_recovery"], flagged["failed_on_base"]) == (1, 1, 1)
+    assert flagged["mean_first_base_step"] == 1.5  # rows 0 and 2; row 1 never handed back
+    assert format_start_split({"joint_ood": summarize(info, ocr)}).endswith(
+        "Recovery-first failures: 1 never handed back, 1 ended in a later recovery, 1 ended on the base; "
+        "first hand-back at step 2 on average"
+    )

@@ -14,6 +14,8 @@ import math
 import sys
 from pathlib import Path
 
+import numpy as np
+
 
 def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
     """95% Wilson score interval of a success rate (sensible at 0/n and n/n too)."""
@@ -23,6 +25,13 @@ def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, flo
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
     return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def first_base_steps(in_recovery) -> list[int]:
+    """(T, B) bool modes -> per row, the first step the row ran on the base; -1 if it never did."""
+    modes = np.asarray(in_recovery, dtype=bool)
+    on_base = ~modes
+    return np.where(on_base.any(0), on_base.argmax(0), -1).tolist()
 
 
 def _arg(args: list[str], name: str) -> str | None:
@@ -51,6 +60,16 @@ def summarize(eval_info: dict, ocr: dict | None) -> dict:
             for name, flag in (("started_ood", True), ("started_id", False)):
                 picked = [s for s, f in zip(successes, started) if bool(f) == flag]
                 out[name] = {"episodes": len(picked), "successes": sum(picked)}
+            first, ended = ocr.get("first_base_step"), ocr.get("ended_in_recovery")
+            if first is not None and ended is not None:  # how episodes that began with a recovery ended
+                flagged = [(s, f, e) for s, o, f, e in zip(successes, started, first, ended) if o]
+                back = [f for _, f, _ in flagged if f >= 0]
+                out["started_ood"].update(
+                    mean_first_base_step=sum(back) / len(back) if back else None,
+                    failed_never_handed_back=sum(1 for s, f, _ in flagged if not s and f < 0),
+                    failed_in_recovery=sum(1 for s, f, e in flagged if not s and f >= 0 and e),
+                    failed_on_base=sum(1 for s, f, e in flagged if not s and f >= 0 and not e),
+                )
     return out
 
 
@@ -64,7 +83,16 @@ def format_start_split(rows: dict[str, dict]) -> str:
         for key, what in (("started_ood", "started out of distribution (recovery first)"), ("started_id", "started on the base")):
             k, n = r[key]["successes"], r[key]["episodes"]
             parts.append(f"{n} {what}: {k} succeeded" + (f" ({k / n:.2f})" if n else ""))
-        lines.append(f"{name}: " + "; ".join(parts))
+        line = f"{name}: " + "; ".join(parts)
+        flagged = r["started_ood"]
+        if "failed_on_base" in flagged:
+            mean = flagged["mean_first_base_step"]
+            line += (
+                f". Recovery-first failures: {flagged['failed_never_handed_back']} never handed back, "
+                f"{flagged['failed_in_recovery']} ended in a later recovery, {flagged['failed_on_base']} ended on the base"
+                + (f"; first hand-back at step {mean:.0f} on average" if mean is not None else "")
+            )
+        lines.append(line)
     return "\n".join(lines)
 
 
@@ -109,6 +137,10 @@ def run_eval(args: list[str]) -> dict:
             "threshold": batches[0]["threshold"] if batches else None,
             # per episode, in eval_info's order (batches run one after another, rows in env order)
             "started_ood": [bool(f) for b in batches for f in b["started_ood"]],
+            # per episode: the first step on the base (-1: never handed back) and the last step's mode
+            # (meaningful for failures, which run the whole episode)
+            "first_base_step": [step for b in batches for step in first_base_steps(b["in_recovery"])],
+            "ended_in_recovery": [bool(m) for b in batches for m in b["in_recovery"][-1]],
         }
         (Path(output_dir) / "ocr_stats.json").write_text(json.dumps(ocr, indent=2))
     return summarize(eval_info, ocr)

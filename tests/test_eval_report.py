@@ -41,19 +41,21 @@ def test_successes_split_by_where_episodes_started():
 
 
 def test_how_recovery_first_episodes_ended():
-    from lerobot_ocr.eval_report import first_base_steps
+    from lerobot_ocr.eval_report import episode_modes
 
     # (T=4 steps, B=4 rows): row 0 handed back at step 2; row 1 never; row 2 at step 1, then recovering
     # again; row 3 on the base from step 0
     modes = [[True, True, True, False], [True, True, False, False], [False, True, True, False], [False, True, True, False]]
-    assert first_base_steps(modes) == [2, -1, 1, 0]
+    rows = episode_modes(modes)
+    assert rows["first_base_step"] == [2, -1, 1, 0]
+    assert rows["ended_in_recovery"] == [False, True, True, False]
     info = {
         "per_task": [{"metrics": {"successes": [False, False, False, True]}}],
         "overall": {"avg_max_reward": 0.6, "eval_s": 1.0},
     }
     ocr = {
         "mean_recovery_fraction": 0.5, "started_ood": modes[0],
-        "first_base_step": first_base_steps(modes), "ended_in_recovery": modes[-1],
+        "first_base_step": rows["first_base_step"], "ended_in_recovery": rows["ended_in_recovery"],
     }  # fmt: skip
     flagged = summarize(info, ocr)["started_ood"]
     assert (flagged["failed_never_handed_back"], flagged["failed_in_recovery"], flagged["failed_on_base"]) == (1, 1, 1)
@@ -62,3 +64,19 @@ def test_how_recovery_first_episodes_ended():
         "Recovery-first failures: 1 never handed back, 1 ended in a later recovery, 1 ended on the base; "
         "first hand-back at step 2 on average"
     )
+
+
+def test_episode_stats_stop_at_each_episode_end():
+    from lerobot_ocr.eval_report import episode_modes, episode_steps
+
+    # LeRobot's cumulative done flags (B=3, T=4): row 0 done at step 1, row 1 at step 3, row 2 never
+    done = [[False, True, True, True], [False, False, False, True], [False, False, False, False]]
+    steps = episode_steps(done)
+    assert steps == [2, 4, 4]
+    # (T, B) modes: row 0 recovers for its 2 steps, then (frozen env, episode over) runs on the base
+    modes = [[True, True, False], [True, False, False], [False, True, True], [False, True, True]]
+    whole, cut = episode_modes(modes), episode_modes(modes, steps)
+    assert whole["recovery_fraction"][0] == 0.5 and cut["recovery_fraction"][0] == 1.0
+    assert whole["first_base_step"][0] == 2 and cut["first_base_step"][0] == -1  # never handed back in its episode
+    assert whole["ended_in_recovery"][0] is False and cut["ended_in_recovery"][0] is True
+    assert cut["recovery_fraction"][1:] == whole["recovery_fraction"][1:] == [0.75, 0.5]  # rows that ran to T

@@ -41,3 +41,6 @@ def test_convert_train_eval(pusht_dataset, diffusion_base, tmp_path, monkeypatch
     stats = json.loads((out / "ocr_stats.json").read_text())
     assert stats["mean_recovery_fraction"] > 0 and stats["recovery_chunks"] >= 1  # an OOD start triggers recovery
     assert stats["started_ood"] == [True]  # per episode: its first observation was flagged
+    # per episode, cut at its end: the rollout's done flags lined up with the policy's steps
+    assert len(stats["episode_steps"]) == 1 and 1 <= stats["episode_steps"][0] <= 12
+    assert len(stats["recovery_fraction"]) == len(stats["first_base_step"]) == 1

@@ -3,8 +3,10 @@
 Runs LeRobot's own eval in-process with the arguments given (`--policy.path=… --env.type=… …`).
 When the policy is `ocr_joint`, its per-batch `ocr_stats()` are collected and written to
 `<output_dir>/ocr_stats.json` (mean fraction of steps in recovery, recovery chunks, hand-backs, carried
-chunks, chunks that followed a working push, stalls broken, and per episode whether the switch flagged its first observation, so that
-successes split by where they started).
+chunks, chunks that followed a working push, stalls broken, and per episode whether the switch flagged its
+first observation, so that successes split by where they started, its steps, fraction in recovery, first
+step on the base and last mode). Per-episode stats stop at the episode's end: LeRobot keeps every env of
+a batch stepping (frozen) until the last one is done, and the policy keeps acting on the finished ones.
 """
 
 from __future__ import annotations
@@ -27,11 +29,27 @@ def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, flo
     return (max(0.0, centre - half), min(1.0, centre + half))
 
 
-def first_base_steps(in_recovery) -> list[int]:
-    """(T, B) bool modes -> per row, the first step the row ran on the base; -1 if it never did."""
+def episode_steps(done) -> list[int]:
+    """(B, T) cumulative done flags of one LeRobot rollout -> per row, its episode's steps (first done + 1).
+
+    LeRobot steps every env until the last one is done (finished ones frozen), so the policy acts for T
+    steps in every row; only the first `steps` of a row belong to its episode.
+    """
+    d = np.asarray(done, dtype=bool)
+    return np.where(d.any(1), d.argmax(1) + 1, d.shape[1]).tolist()
+
+
+def episode_modes(in_recovery, steps: list[int] | None = None) -> dict[str, list]:
+    """(T, B) bool modes of one rollout (+ per-row episode steps; None = all T) -> per row: its fraction of
+    steps in recovery, its first step on the base (-1: never handed back) and whether its last step recovered."""
     modes = np.asarray(in_recovery, dtype=bool)
-    on_base = ~modes
-    return np.where(on_base.any(0), on_base.argmax(0), -1).tolist()
+    steps = [modes.shape[0]] * modes.shape[1] if steps is None else steps
+    rows = [modes[:n, b] for b, n in enumerate(steps)]
+    return {
+        "recovery_fraction": [float(r.mean()) for r in rows],
+        "first_base_step": [int(np.argmin(r)) if not r.all() else -1 for r in rows],
+        "ended_in_recovery": [bool(r[-1]) for r in rows],
+    }
 
 
 def _arg(args: list[str], name: str) -> str | None:
@@ -113,7 +131,16 @@ def run_eval(args: list[str]) -> dict:
             policies.append(self)
         original_reset(self)
 
+    dones: list[np.ndarray] = []  # (B, T) per rollout, to cut each row's stats at its episode's end
+    original_rollout = lerobot_eval.rollout
+
+    def rollout(*a, **kw):
+        data = original_rollout(*a, **kw)
+        dones.append(data["done"].cpu().numpy())
+        return data
+
     OcrJointPolicy.reset = reset
+    lerobot_eval.rollout = rollout
     argv = sys.argv
     try:
         sys.argv = ["lerobot-eval", *args]
@@ -121,13 +148,22 @@ def run_eval(args: list[str]) -> dict:
     finally:
         sys.argv = argv
         OcrJointPolicy.reset = original_reset
+        lerobot_eval.rollout = original_rollout
     eval_info = json.loads((Path(output_dir) / "eval_info.json").read_text())
     ocr = None
     if policies:
         batches = [*policies[-1].completed_stats, policies[-1].ocr_stats()]
         batches = [b for b in batches if b.get("steps")]
-        fractions = [f for b in batches for f in b["recovery_fraction"]]
+        aligned = len(dones) == len(batches) and all(
+            d.shape == b["in_recovery"].shape[::-1] for d, b in zip(dones, batches)
+        )  # one rollout per batch, one policy call per env step
+        episodes = [
+            episode_modes(b["in_recovery"], episode_steps(d) if aligned else None)
+            for b, d in zip(batches, dones if aligned else [None] * len(batches))
+        ]
+        fractions = [f for e in episodes for f in e["recovery_fraction"]]
         ocr = {
+            # over each episode's own steps (steps after an env finished are left out)
             "mean_recovery_fraction": sum(fractions) / len(fractions) if fractions else 0.0,
             "recovery_chunks": sum(b["recovery_chunks"] for b in batches),
             "handbacks": sum(b["handbacks"] for b in batches),
@@ -137,10 +173,12 @@ def run_eval(args: list[str]) -> dict:
             "threshold": batches[0]["threshold"] if batches else None,
             # per episode, in eval_info's order (batches run one after another, rows in env order)
             "started_ood": [bool(f) for b in batches for f in b["started_ood"]],
-            # per episode: the first step on the base (-1: never handed back) and the last step's mode
-            # (meaningful for failures, which run the whole episode)
-            "first_base_step": [step for b in batches for step in first_base_steps(b["in_recovery"])],
-            "ended_in_recovery": [bool(m) for b in batches for m in b["in_recovery"][-1]],
+            # per episode: its steps, fraction in recovery, first step on the base (-1: never handed back)
+            # and whether its last step was in recovery
+            "episode_steps": [n for d in dones for n in episode_steps(d)] if aligned else None,
+            "recovery_fraction": fractions,
+            "first_base_step": [s for e in episodes for s in e["first_base_step"]],
+            "ended_in_recovery": [m for e in episodes for m in e["ended_in_recovery"]],
         }
         (Path(output_dir) / "ocr_stats.json").write_text(json.dumps(ocr, indent=2))
     return summarize(eval_info, ocr)

@@ -157,10 +157,8 @@ def run_eval(args: list[str]) -> dict:
         aligned = len(dones) == len(batches) and all(
             d.shape == b["in_recovery"].shape[::-1] for d, b in zip(dones, batches)
         )  # one rollout per batch, one policy call per env step
-        episodes = [
-            episode_modes(b["in_recovery"], episode_steps(d) if aligned else None)
-            for b, d in zip(batches, dones if aligned else [None] * len(batches))
-        ]
+        steps = [episode_steps(d) for d in dones] if aligned else [None] * len(batches)
+        episodes = [episode_modes(b["in_recovery"], s) for b, s in zip(batches, steps)]
         fractions = [f for e in episodes for f in e["recovery_fraction"]]
         ocr = {
             # over each episode's own steps (steps after an env finished are left out)
@@ -175,7 +173,7 @@ def run_eval(args: list[str]) -> dict:
             "started_ood": [bool(f) for b in batches for f in b["started_ood"]],
             # per episode: its steps, fraction in recovery, first step on the base (-1: never handed back)
             # and whether its last step was in recovery
-            "episode_steps": [n for d in dones for n in episode_steps(d)] if aligned else None,
+            "episode_steps": [n for s in steps for n in s] if aligned else None,
             "recovery_fraction": fractions,
             "first_base_step": [s for e in episodes for s in e["first_base_step"]],
             "ended_in_recovery": [m for e in episodes for m in e["ended_in_recovery"]],

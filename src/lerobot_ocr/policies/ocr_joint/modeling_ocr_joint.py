@@ -438,13 +438,13 @@ class OcrJointPolicy(PreTrainedPolicy):
                 frames[rows], keypoints[rows], state[rows], noise=noise, chunks=self._rec_count[rows], grasped=grasped,
                 carrying=carrying, last_action=self._rec_actions[rows, -1], following=following,
             )  # fmt: skip
-            # the centre's planned shift over the executed actions (frame n, as the last one reaches it)
-            executed = min(cfg.n_recovery_action_steps, plan.shape[1] - 1)
-            self._chunk_shift[rows] = (plan[:, executed] - plan[:, 0]).mean(1).to(self._chunk_shift.dtype)
             if carrying is not None:
                 self._n_carried += int(carrying.sum())
             if following is not None:
                 self._n_followed += int(following.sum())
+                # the centre's planned shift over the executed actions (frame n, as the last one reaches it)
+                executed = min(cfg.n_recovery_action_steps, plan.shape[1] - 1)
+                self._chunk_shift[rows] = (plan[:, executed] - plan[:, 0]).mean(1).to(self._chunk_shift.dtype)
             self._rec_count[rows] += 1
             chunk = actions[:, : cfg.n_recovery_action_steps].repeat_interleave(cfg.recovery_action_repeat, dim=1)
             self._rec_actions[rows] = chunk.to(self._rec_actions.dtype)

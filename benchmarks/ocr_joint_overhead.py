@@ -142,28 +142,20 @@ def main() -> None:
     work = Path(tempfile.mkdtemp(prefix="ocr_overhead_"))
     try:
         (base, bpre, bpost), (joint, jpre, jpost), id_pose = build(work, args.episodes)
-        runs = {"base_id": [], "joint_id": [], "joint_every_id": [], "base_ood": [], "joint_ood": []}
+        runs = {"base_id": [], "joint_id": [], "base_ood": [], "joint_ood": []}
         for _ in range(args.repeats):  # interleave, so that machine noise hits both alike
             runs["base_id"].append(summary(time_steps(base, bpre, bpost, id_pose, args.batch, args.steps)))
-            joint.config.check_every_step = False
             runs["joint_id"].append(summary(time_steps(joint, jpre, jpost, id_pose, args.batch, args.steps)))
-            joint.config.check_every_step = True
-            runs["joint_every_id"].append(summary(time_steps(joint, jpre, jpost, id_pose, args.batch, args.steps)))
-            joint.config.check_every_step = False
             runs["base_ood"].append(summary(time_steps(base, bpre, bpost, OOD_POSE, args.batch, args.steps)))
             runs["joint_ood"].append(summary(time_steps(joint, jpre, jpost, OOD_POSE, args.batch, args.steps)))
         assert joint.ocr_stats()["mean_recovery_fraction"] == 1.0  # the OOD run really recovered
         best = {k: min(v, key=lambda s: s["mean_ms"]) for k, v in runs.items()}
-        paired = {}
-        for every in (False, True):
-            joint.config.check_every_step = every
-            paired[every] = min(
-                (own_time(joint, jpre, jpost, id_pose, args.batch, args.steps) for _ in range(args.repeats)),
-                key=lambda r: r["overhead"],
-            )
-        joint.config.check_every_step = False
+        paired = min(
+            (own_time(joint, jpre, jpost, id_pose, args.batch, args.steps) for _ in range(args.repeats)),
+            key=lambda r: r["overhead"],
+        )
         # One recovery chunk alone: manifold recovery vector + plan + inverse-policy sampling.
-        frames, kps, state = joint._observation(jpre(observation(OOD_POSE, args.batch, 0)))
+        frames, kps, state, _ = joint._observe(jpre(observation(OOD_POSE, args.batch, 0)))
         chunk_times = []
         with torch.inference_mode():
             for _ in range(20):
@@ -174,7 +166,6 @@ def main() -> None:
         shutil.rmtree(work, ignore_errors=True)
 
     overhead = best["joint_id"]["mean_ms"] / best["base_id"]["mean_ms"] - 1
-    overhead_every = best["joint_every_id"]["mean_ms"] / best["base_id"]["mean_ms"] - 1
     result = {
         "benchmark": "ocr_joint_overhead",
         "date": dt.date.today().isoformat(),
@@ -185,10 +176,7 @@ def main() -> None:
             "base": best["base_id"],
             "joint": best["joint_id"],
             "overhead": overhead,
-            "joint_check_every_step": best["joint_every_id"],
-            "overhead_check_every_step": overhead_every,
-            "paired": paired[False],
-            "paired_check_every_step": paired[True],
+            "paired": paired,
         },
         "ood": {"base": best["base_ood"], "joint": best["joint_ood"]},
         "recovery_chunk_ms": 1e3 * statistics.median(chunk_times),
@@ -211,17 +199,15 @@ weights: this measures time, not success.
 | observation | base alone (ms/step) | ocr_joint (ms/step) | overhead |
 |---|---|---|---|
 | in distribution (base drives) | {i['base']['mean_ms']:.2f} | {i['joint']['mean_ms']:.2f} | {100 * i['overhead']:+.1f}% |
-| in distribution, `--policy.check_every_step=true` | {i['base']['mean_ms']:.2f} | {i['joint_check_every_step']['mean_ms']:.2f} | {100 * i['overhead_check_every_step']:+.1f}% |
 | out of distribution (recovery drives) | {o['base']['mean_ms']:.2f} | {o['joint']['mean_ms']:.2f} | — |
 
 Paired (same run: ocr_joint's own time vs the time spent inside its base): {i['paired']['own_ms']:.3f} ms own per step
-on {i['paired']['base_ms']:.2f} ms of base = **{100 * i['paired']['overhead']:.1f}%** overhead
-({i['paired_check_every_step']['own_ms']:.3f} ms = {100 * i['paired_check_every_step']['overhead']:.1f}% with `check_every_step`). The direct
+on {i['paired']['base_ms']:.2f} ms of base = **{100 * i['paired']['overhead']:.1f}%** overhead. The direct
 comparison above differs by run-to-run noise of the base's chunk inference (± 5% here); the paired figure does not.
 
-Median step (no chunk planned): base {i['base']['median_ms']:.3f} ms, ocr_joint {i['joint']['median_ms']:.3f} ms
-({i['joint_check_every_step']['median_ms']:.3f} ms when checking every step). By default rows on the base are checked
-when the base plans its next chunk, as in the paper, so most steps cost what the base costs.
+Median step (no chunk planned): base {i['base']['median_ms']:.3f} ms, ocr_joint {i['joint']['median_ms']:.3f} ms.
+Rows on the base are checked when the base plans its next chunk, as in the paper, so most steps cost what the
+base costs.
 
 One recovery chunk (recovery vector + keypoint plan + inverse-policy sampling of 16 actions): {result['recovery_chunk_ms']:.1f} ms.
 

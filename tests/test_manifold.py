@@ -107,6 +107,17 @@ def test_paper_magnitude_function(manifold, data):
     torch.testing.assert_close(out.vector, expected.mean(1))
 
 
+def test_an_ood_set_with_no_keypoint_deficit_gets_the_paper_direction(data):
+    """Every keypoint above its own threshold but the set flagged OOD: "log_deficit" alone gives 0."""
+    m = KeypointManifold(n_components=3, random_state=0).fit(data)
+    x = torch.from_numpy(data[:4])
+    assert (m.recovery(x).vector.norm(dim=-1) < 1e-9).all()  # in the data: no recovery
+    m.set_threshold(1e9)  # now every set is OOD, while the per-keypoint thresholds stay calibrated
+    out, paper = m.recovery(x), m.recovery(x, magnitude="paper")
+    assert out.is_ood.all() and (out.vector.norm(dim=-1) > 0).all()
+    torch.testing.assert_close(out.vector, paper.vector)
+
+
 @pytest.mark.parametrize("score_type", ["mean_log_density", "min_log_density", "mean_density"])
 def test_score_types(data, score_type):
     m = KeypointManifold(n_components=2, score_type=score_type).fit(data)

@@ -89,125 +89,26 @@ def test_switch_is_decided_per_row(joint, id_pose, monkeypatch):
     assert stats["started_ood"] == [False, True, False]
 
 
-def test_recovery_actions_are_held_for_the_repeat(diffusion_base, converted_dataset, monkeypatch):
-    """--policy.recovery_action_repeat=3: each of the 2 executed actions is held 3 steps, then a new chunk."""
-    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=2, recovery_action_repeat=3)
-    chunks = iter(torch.arange(2 * TINY_OCR["horizon"] * 2, dtype=torch.float32).reshape(2, 1, -1, 2))
-    monkeypatch.setattr(joint.inverse, "sample", lambda plan, state, frames, noise=None: next(chunks))
-    joint.reset()
-    actions = [joint.select_action(observation([OOD_POSE]))[0, 0].item() for _ in range(7)]
-    first, second = 0.0, 2 * TINY_OCR["horizon"]  # action 0 of each chunk (x of its first row)
-    assert actions == [first] * 3 + [first + 2] * 3 + [second]
-    assert joint.ocr_stats()["recovery_chunks"] == 2
-
-
-def test_delay_countdown_counts_chunks_per_recovery(diffusion_base, converted_dataset, id_pose):
-    """The planner gets, per row, the chunks already executed since the row entered recovery."""
-    joint = make_joint(
-        diffusion_base, converted_dataset, n_recovery_action_steps=1, check_every_step=True, delay_countdown=8
-    )
-    seen, planner = [], joint.planner
-    joint.planner = lambda kps, vec, dist, chunks=None, grasped=None, **kw: (
-        seen.append(chunks.tolist()) or planner(kps, vec, dist, chunks, grasped, **kw)
-    )
-    joint.reset()
-    far = [[20.0, 480.0]]  # the agent far from the T: the ramp alone would hold the plan still
-    for pose in (OOD_POSE, OOD_POSE, OOD_POSE, id_pose, OOD_POSE):
-        joint.select_action(observation([pose], far))
-    assert seen == [[0], [1], [2], [0]]  # a new recovery starts counting again
-    kps = joint._keypoints(joint._pose_matrix(torch.tensor([OOD_POSE])))
-    vec = torch.tensor([[-1.0, 0.0]])
-    still = planner(kps, vec, torch.tensor([1000.0]), torch.tensor([0]))
-    pushed = planner(kps, vec, torch.tensor([1000.0]), torch.tensor([2]))  # cap 16 - 16 = 0 frames still
-    assert torch.equal(still[0, -1], kps[0]) and not torch.equal(pushed[0, 1], kps[0])
-
-
-def test_grasp_delay_follows_the_previous_chunks_last_gripper_command(diffusion_base, converted_dataset, id_pose, monkeypatch):
-    """A row counts as holding the object when its previous recovery chunk ended with a close command."""
-    joint = make_joint(
-        diffusion_base, converted_dataset, n_recovery_action_steps=2, check_every_step=True, grasp_delay=0,
-        gripper_action_index=1,
-    )
-    seen, planner = [], joint.planner
-    joint.planner = lambda kps, vec, dist, chunks=None, grasped=None, **kw: (
-        seen.append(grasped.tolist()) or planner(kps, vec, dist, chunks, grasped, **kw)
-    )
-    horizon = TINY_OCR["horizon"]
-    # Chunk i's actions: (x, gripper); the second executed action (index 1) is the chunk's last.
-    grippers = iter([[-1.0, 1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]])
-
-    def sample(plan, state, frames, noise=None):
-        chunk = torch.full((len(plan), horizon, 2), -1.0)
-        chunk[:, :2, 1] = torch.tensor(next(grippers))
-        return chunk
-
-    monkeypatch.setattr(joint.inverse, "sample", sample)
-    joint.reset()
-    for pose in [OOD_POSE] * 6 + [id_pose] * 2 + [OOD_POSE] * 4:
-        joint.select_action(observation([pose]))
-    # chunks 1-3: a new recovery, then closed, then opened; hand back; chunk 4 starts a new recovery
-    # (unheld, though chunk 3 ended closed), chunk 5 follows chunk 4's close
-    assert seen == [[False], [True], [False], [False], [True]]
-    assert joint.planner(torch.zeros(1, 1, 2), torch.ones(1, 2), torch.tensor([1e6]), None, torch.tensor([True]))[
-        0, 1
-    ].abs().sum() > 0  # grasp_delay 0: the held object moves from frame 1 even though the robot is "far"
-    with pytest.raises(ValueError, match="gripper_action_index"):
-        make_joint(diffusion_base, converted_dataset, grasp_delay=0, gripper_action_index=2)
-
-
-def test_follow_delay_keeps_a_working_push_going(diffusion_base, converted_dataset, monkeypatch):
-    """--policy.follow_delay: a row whose last recovery chunk moved the object along its plan (by at
-    least follow_fraction of the planned shift) plans with the capped delay; a stalled one does not."""
-    joint = make_joint(
-        diffusion_base, converted_dataset, n_recovery_action_steps=1, check_every_step=True, fixed_delay=12,
-        follow_delay=0, follow_fraction=0.5,
-    )
-    marker = torch.zeros(1, TINY_OCR["horizon"], 2)
-    monkeypatch.setattr(joint.inverse, "sample", lambda plan, state, frames, noise=None: marker.expand(len(plan), -1, -1))
-    seen, plans, planner = [], [], joint.planner
-
-    def spy(kps, vec, dist, chunks=None, grasped=None, following=None, **kw):
-        seen.append(None if following is None else following.tolist())
-        plans.append(planner(kps, vec, dist, chunks, grasped, following=following, **kw))
-        return plans[-1]
-
-    joint.planner = spy
-    x, y, theta = OOD_POSE
-    joint.reset()
-    joint.select_action(observation([OOD_POSE, OOD_POSE]))  # chunk 1: nothing to follow yet, delay 12
-    assert seen == [[False, False]] and plans[0][:, 1].equal(plans[0][:, 0])
-    # Chunk 1's plan still holds the object at its first executed frame: nothing to follow.
-    joint.select_action(observation([OOD_POSE, OOD_POSE]))
-    assert seen[-1] == [False, False]
-    joint._chunk_shift[:] = torch.tensor([-10.0, 0.0])  # as if the last chunk planned 10 px to the left
-    moved = [[x - 6.0, y, theta], [x - 4.0, y + 30.0, theta]]  # 60% of the shift / 40% and sideways
-    joint.select_action(observation(moved))
-    assert seen[-1] == [True, False] and joint.ocr_stats()["followed_chunks"] == 1
-    assert not plans[-1][0, 1].equal(plans[-1][0, 0]) and plans[-1][1, 1].equal(plans[-1][1, 0])  # delay 0 vs 12
-    with pytest.raises(ValueError, match="follow_delay must be in"):
-        make_joint(diffusion_base, converted_dataset, follow_delay=16)
-    with pytest.raises(ValueError, match="follow_fraction must be > 0"):
-        make_joint(diffusion_base, converted_dataset, follow_fraction=0.0)
-
-
 def test_base_history_stays_right_through_a_recovery(diffusion_base, converted_dataset, id_pose):
-    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=1, check_every_step=True)
+    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=1)
     joint.reset()
     normalized = lambda s: joint._base_pre(observation([id_pose], [s]))["observation.state"]  # noqa: E731
-    states = [[100.0 + 10 * t, 300.0] for t in range(5)]
-    joint.select_action(observation([id_pose], [states[0]]))  # base runs, queues a chunk
-    assert len(joint.base._queues["action"]) == joint.base.config.n_action_steps - 1
-    for t in (1, 2, 3):  # the object is pushed out: recovery; the base only observes
+    n = joint.base.config.n_action_steps
+    states = [[100.0 + 10 * t, 300.0] for t in range(n + 4)]
+    for t in range(n):  # one base chunk
+        joint.select_action(observation([id_pose], [states[t]]))
+    assert len(joint.base._queues["action"]) == 0
+    for t in (n, n + 1, n + 2):  # the object is pushed out: recovery; the base only observes
         joint.select_action(observation([OOD_POSE], [states[t]]))
         assert joint.ocr_stats()["in_recovery"][-1].tolist() == [True]
         queue = list(joint.base._queues["observation.state"])
         torch.testing.assert_close(queue[-1], normalized(states[t]))
         assert len(joint.base._queues["action"]) == 0  # no stale chunk kept
-    joint.select_action(observation([id_pose], [states[4]]))  # back in distribution: hand back
+    joint.select_action(observation([id_pose], [states[n + 3]]))  # back in distribution: hand back
     assert joint.ocr_stats()["in_recovery"][-1].tolist() == [False] and joint.ocr_stats()["handbacks"] == 1
     queue = list(joint.base._queues["observation.state"])
-    torch.testing.assert_close(torch.stack(queue), torch.stack([normalized(states[3]), normalized(states[4])]))
-    assert len(joint.base._queues["action"]) == joint.base.config.n_action_steps - 1  # a fresh chunk
+    torch.testing.assert_close(torch.stack(queue), torch.stack([normalized(states[n + 2]), normalized(states[n + 3])]))
+    assert len(joint.base._queues["action"]) == n - 1  # a fresh chunk
 
 
 def test_rows_on_the_base_are_checked_at_the_end_of_its_chunk(joint, id_pose):
@@ -219,20 +120,6 @@ def test_rows_on_the_base_are_checked_at_the_end_of_its_chunk(joint, id_pose):
     stats = joint.ocr_stats()
     assert stats["in_recovery"][:, 0].tolist() == [False] * n + [True]
     assert np.isnan(stats["score"][1:n, 0]).all() and np.isfinite(stats["score"][[0, n], 0]).all()
-
-
-def test_hysteresis_and_latch(diffusion_base, converted_dataset, id_pose):
-    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=1, hysteresis=1e6)
-    joint.reset()
-    joint.select_action(observation([OOD_POSE]))
-    joint.select_action(observation([id_pose]))  # ID, but not by the hysteresis margin: keeps recovering
-    assert joint.ocr_stats()["in_recovery"][:, 0].tolist() == [True, True]
-
-    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=1, latch=True, check_every_step=True)
-    joint.reset()
-    for pose in (OOD_POSE, id_pose, OOD_POSE):
-        joint.select_action(observation([pose]))
-    assert joint.ocr_stats()["in_recovery"][:, 0].tolist() == [True, False, False]  # latched on the base
 
 
 def test_fixed_delay_plans_hold_still_then_push(joint):
@@ -353,51 +240,17 @@ def test_act_base(pusht_dataset, converted_dataset, id_pose):
     assert chunk.shape == (2, 2, 2)
 
 
-def test_a_held_object_is_carried_along_the_plan(diffusion_base, converted_dataset, monkeypatch):
-    """--policy.carry_tolerance: after a chunk in which the object moved with the closed gripper, the next
-    chunk shifts the last action along a plan that moves at once; otherwise the inverse policy is sampled."""
-    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=2, carry_tolerance=1.0)
-    sampled = []
 
-    def sample(plan, state, frames, noise=None):
-        sampled.append(len(plan))
-        return torch.full((len(plan), TINY_OCR["horizon"], 2), 150.0)  # action[-1] > 0 reads "gripper closed"
 
-    monkeypatch.setattr(joint.inverse, "sample", sample)
+def test_a_new_batch_size_starts_new_episodes_and_reset_always_works(joint, id_pose):
+    """LeRobot may call select_action with another batch size (a last, smaller batch): a new rollout."""
     joint.reset()
-    x, y, theta = OOD_POSE
-    for _ in range(2):
-        joint.select_action(observation([OOD_POSE], [[300.0, 100.0]]))
-    assert sampled == [1]
-    # the object and the end effector both moved 10 px right during that chunk: it is held
-    carried = [joint.select_action(observation([[x + 10, y, theta]], [[310.0, 100.0]]))[0] for _ in range(2)]
-    assert sampled == [1] and joint.ocr_stats()["carried_chunks"] == 1
-    step = joint.config.step_size
-    first, second = carried[0] - 150.0, carried[1] - 150.0
-    assert torch.linalg.vector_norm(first).item() == pytest.approx(step, rel=1e-4)  # moves from the first action
-    torch.testing.assert_close(second, 2 * first, atol=1e-3, rtol=0)
-    assert first[0] < 0  # toward the demos on the left
-    # the object moved again but the end effector did not: not held, the inverse policy plans
-    joint.select_action(observation([[x + 20, y, theta]], [[310.0, 100.0]]))
-    assert sampled == [1, 1] and joint.ocr_stats()["carried_chunks"] == 1
-
-
-def test_a_stuck_row_on_the_base_gets_one_recovery_chunk(diffusion_base, converted_dataset, id_pose, monkeypatch):
-    """--policy.stall_steps: in distribution, but the object has not moved for `stall_steps` steps:
-    at the end of the base's chunk the row gets a recovery chunk, then hands back."""
-    joint = make_joint(
-        diffusion_base, converted_dataset, n_recovery_action_steps=1, stall_steps=3, stall_tolerance=1.0
-    )
-    marker = torch.full((1, TINY_OCR["horizon"], 2), 123.0)
-    monkeypatch.setattr(joint.inverse, "sample", lambda plan, state, frames, noise=None: marker.expand(len(plan), -1, -1))
-    n = joint.base.config.n_action_steps  # 4: the stall (step 3) is acted on when the base's chunk ends
-    x, y, theta = id_pose
-    joint.reset()  # the end effector moves, the object does not
-    actions = [joint.select_action(observation([id_pose], [[200.0 + 5 * i, 200.0]]))[0] for i in range(n + 2)]
-    stats = joint.ocr_stats()
-    assert stats["in_recovery"][:, 0].tolist() == [False] * n + [True, False]  # one chunk, then back on the base
-    assert actions[n].tolist() == [123.0, 123.0] and stats["stalls"] == 1
-    joint.reset()  # an object that keeps moving (2 px back and forth, in distribution) is never stuck
-    for i in range(3 * n):
-        joint.select_action(observation([[x + 2 * (i % 2), y, theta]], [[200.0, 200.0]]))
-    assert not joint.ocr_stats()["in_recovery"].any() and joint.ocr_stats()["stalls"] == 0
+    before = len(joint.completed_stats)
+    joint.select_action(observation([OOD_POSE]))
+    out = joint.select_action(observation([id_pose, OOD_POSE, id_pose]))
+    assert out.shape == (3, 2)
+    assert len(joint.completed_stats) == before + 1 and joint.completed_stats[-1]["recovery_fraction"] == [1.0]
+    joint.reset()
+    joint.reset()
+    assert joint.completed_stats[-1]["started_ood"] == [False, True, False]
+    assert joint.ocr_stats() == {"steps": 0}

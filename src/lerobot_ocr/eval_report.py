@@ -2,9 +2,8 @@
 
 Runs LeRobot's own eval in-process with the arguments given (`--policy.path=… --env.type=… …`).
 When the policy is `ocr_joint`, its per-batch `ocr_stats()` are collected and written to
-`<output_dir>/ocr_stats.json` (mean fraction of steps in recovery, recovery chunks, hand-backs, carried
-chunks, chunks that followed a working push, stalls broken, and per episode whether the switch flagged its
-first observation, so that successes split by where they started, its steps, fraction in recovery, first
+`<output_dir>/ocr_stats.json` (mean fraction of steps in recovery, recovery chunks, hand-backs, and per
+episode whether the switch flagged its first observation, so that successes split by where they started, its steps, fraction in recovery, first
 step on the base and last mode). Per-episode stats stop at the episode's end: LeRobot keeps every env of
 a batch stepping (frozen) until the last one is done, and the policy keeps acting on the finished ones.
 """
@@ -165,9 +164,6 @@ def run_eval(args: list[str]) -> dict:
             "mean_recovery_fraction": sum(fractions) / len(fractions) if fractions else 0.0,
             "recovery_chunks": sum(b["recovery_chunks"] for b in batches),
             "handbacks": sum(b["handbacks"] for b in batches),
-            "carried_chunks": sum(b.get("carried_chunks", 0) for b in batches),
-            "stalls": sum(b.get("stalls", 0) for b in batches),
-            "followed_chunks": sum(b.get("followed_chunks", 0) for b in batches),
             "threshold": batches[0]["threshold"] if batches else None,
             # per episode, in eval_info's order (batches run one after another, rows in env order)
             "started_ood": [bool(f) for b in batches for f in b["started_ood"]],

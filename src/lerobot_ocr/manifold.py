@@ -316,7 +316,14 @@ class KeypointManifold(nn.Module):
           calibrated per-keypoint log-density threshold: exactly 0 inside the data, rising smoothly to
           1 far away. Differences of log densities do not depend on units, so the same temperature
           works in pixels and metres, and the step size alpha of the planner is a speed.
-        The output vector is the mean over keypoints, as in the paper.
+        The output vector is the mean over keypoints, as in the paper. An OOD keypoint set whose
+        every keypoint lies above its own threshold (deficit 0 everywhere, yet a low score on
+        average) would get a zero "log_deficit" vector; it gets the "paper" magnitude's instead, so
+        an OOD set always has a direction.
+
+        Raises:
+            ValueError: unknown `magnitude`, keypoints of the wrong shape or non-finite.
+            NotFittedError: not fitted, or "log_deficit" before calibration.
         """
         if magnitude not in MAGNITUDE_TYPES:
             raise ValueError(f"Unknown magnitude {magnitude!r}; use one of {MAGNITUDE_TYPES}.")
@@ -324,16 +331,19 @@ class KeypointManifold(nn.Module):
         log_p, grad = self._evaluate(x)
         norm = torch.linalg.vector_norm(grad, dim=-1)
         unit = grad / norm.clamp_min(torch.finfo(grad.dtype).tiny).unsqueeze(-1)
+        grad_p_norm = torch.exp(log_p) * norm  # ||grad p|| = p ||grad log p||; 0 if p underflows
+        paper = torch.exp((phi - grad_p_norm) / eta).unsqueeze(-1) * unit
+        score = self._aggregate(log_p)
+        is_ood = score < self.threshold_ if self.is_calibrated else torch.zeros_like(score, dtype=torch.bool)
         if magnitude == "paper":
-            grad_p_norm = torch.exp(log_p) * norm  # ||grad p|| = p ||grad log p||; 0 if p underflows
-            mag = torch.exp((phi - grad_p_norm) / eta)
+            per_kp = paper
         else:
             if not self.is_calibrated:
                 raise NotFittedError("The 'log_deficit' magnitude needs calibrate(keypoints) first.")
             mag = torch.tanh(torch.clamp(self.keypoint_log_thresholds_ - log_p, min=0.0) / temperature)
-        per_kp = mag.unsqueeze(-1) * unit
-        score = self._aggregate(log_p)
-        is_ood = score < self.threshold_ if self.is_calibrated else torch.zeros_like(score, dtype=torch.bool)
+            per_kp = mag.unsqueeze(-1) * unit
+            weak = is_ood & (torch.linalg.vector_norm(per_kp.mean(-2), dim=-1) < 1e-9)
+            per_kp = torch.where(weak[..., None, None], paper, per_kp)
         return RecoveryOutput(per_kp.mean(-2), per_kp, log_p, score, is_ood)
 
     # ------------------------------------------------------------------------------- save/load

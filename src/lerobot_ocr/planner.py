@@ -79,21 +79,16 @@ def plan_keypoint_trajectory(
 class RecoveryPlanner:
     """The paper's planner with its parameters (alpha, L, d_min, d_max) bundled.
 
+    horizon: L, frames per plan. step_size: alpha, keypoint units per moving frame.
+    d_min, d_max: the delay ramp of `recovery_delay` (keypoint units).
     normalize: scale the recovery vector to unit length first, so `step_size` is the distance the
-    keypoints move per frame (the reference code does this for Push-T). Zero vectors stay zero.
+        keypoints move per frame (the reference code does this for Push-T). Zero vectors stay zero.
     fixed_delay: hold the keypoints still for this many frames whatever the distance, instead of
-    the d_min/d_max ramp (the reference's Push-T eval: 12 of 16, so the robot first gets round
-    the object and the plan asks for a short push).
-    delay_countdown: the delay's upper bound drops by this many frames per chunk already run in
-    this recovery (`chunks`): delay = min(delay, max(0, L - delay_countdown * chunks)); 0 = off.
-    It breaks stalls where the robot hovers at a distance that keeps the plan still (the
-    reference's Square eval counts the delay down 16 -> 0, one frame per call, whatever the distance).
-    grasp_delay: the delay for rows whose gripper holds the object (`grasped`), whatever the
-    distance; None = off. The reference's real robot uses 0 once the gripper is closed: a held
-    object moves from frame 1 instead of every chunk restarting with still frames.
-    follow_delay: the delay's upper bound for rows that are `following` their plan (their previous
-    chunk moved the object along it: the robot is already at the object, pushing it the planned
-    way), so a recovery that works keeps pushing instead of waiting again; None = off.
+        the d_min/d_max ramp (the reference's Push-T eval: 12 of 16, so the robot first gets round
+        the object and the plan asks for a short push); None = the ramp.
+
+    Raises:
+        ValueError: fixed_delay outside [0, horizon), or d_max <= d_min (when called).
     """
 
     horizon: int = 16
@@ -102,80 +97,20 @@ class RecoveryPlanner:
     d_max: float = 1.0
     normalize: bool = True
     fixed_delay: int | None = None
-    delay_countdown: int = 0
-    grasp_delay: int | None = None
-    follow_delay: int | None = None
 
     def __post_init__(self):
         if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:
             raise ValueError(f"fixed_delay must be in [0, horizon={self.horizon}), got {self.fixed_delay}.")
-        if self.delay_countdown < 0:
-            raise ValueError(f"delay_countdown must be >= 0, got {self.delay_countdown}.")
-        if self.grasp_delay is not None and not 0 <= self.grasp_delay < self.horizon:
-            raise ValueError(f"grasp_delay must be in [0, horizon={self.horizon}), got {self.grasp_delay}.")
-        if self.follow_delay is not None and not 0 <= self.follow_delay < self.horizon:
-            raise ValueError(f"follow_delay must be in [0, horizon={self.horizon}), got {self.follow_delay}.")
 
-    def __call__(
-        self,
-        keypoints: torch.Tensor,
-        recovery_vector: torch.Tensor,
-        distance: torch.Tensor,
-        chunks: torch.Tensor | None = None,
-        grasped: torch.Tensor | None = None,
-        delay: torch.Tensor | int | None = None,
-        following: torch.Tensor | None = None,
-    ) -> torch.Tensor:
-        """(B, K, D) keypoints, (B, D) or (B, K, D) recovery vectors, (B,) distances -> (B, L, K, D).
-
-        chunks: (B,) recovery chunks each row has already executed since it started recovering
-        (used by `delay_countdown`; None = 0).
-        grasped: (B,) bool, rows whose gripper holds the object (used by `grasp_delay`; None = none).
-        delay: (B,) or scalar still frames that replace the schedule (e.g. 0 to move at once).
-        following: (B,) bool, rows whose previous chunk moved the object along its plan (used by
-            `follow_delay`; None = none).
-        """
+    def __call__(self, keypoints: torch.Tensor, recovery_vector: torch.Tensor, distance: torch.Tensor) -> torch.Tensor:
+        """(B, K, D) world keypoints, (B, D) or (B, K, D) recovery vectors, (B,) end-effector-to-object
+        distances -> (B, L, K, D) keypoint plan whose frame 0 is `keypoints`."""
         vec = recovery_vector
         if self.normalize:
             norm = torch.linalg.vector_norm(vec, dim=-1, keepdim=True)
             vec = vec / norm.clamp_min(torch.finfo(vec.dtype).tiny)
-        if delay is not None:
-            return plan_keypoint_trajectory(keypoints, vec, self.step_size, self.horizon, delay)
         if self.fixed_delay is None:
             delay = recovery_delay(distance, self.d_min, self.d_max, self.horizon)
         else:
             delay = torch.full((keypoints.shape[0],), self.fixed_delay, dtype=torch.long, device=keypoints.device)
-        if self.grasp_delay is not None and grasped is not None:
-            held = torch.as_tensor(grasped, dtype=torch.bool, device=delay.device)
-            delay = torch.where(held, torch.full_like(delay, self.grasp_delay), delay)
-        if self.follow_delay is not None and following is not None:
-            on_plan = torch.as_tensor(following, dtype=torch.bool, device=delay.device)
-            delay = torch.where(on_plan, delay.clamp_max(self.follow_delay), delay)
-        if self.delay_countdown and chunks is not None:
-            cap = (self.horizon - self.delay_countdown * torch.as_tensor(chunks, device=delay.device)).clamp_min(0)
-            delay = torch.minimum(delay, cap.to(delay.dtype))
         return plan_keypoint_trajectory(keypoints, vec, self.step_size, self.horizon, delay)
-
-
-def carry_along_plan(plan: torch.Tensor, last_action: torch.Tensor) -> torch.Tensor:
-    """Actions that carry a held object along its keypoint plan: (R, L, K, D), (R, A) -> (R, L, A).
-
-    Action t is `last_action` (an absolute end-effector target whose first D entries are the world
-    position) shifted by the plan's mean keypoint displacement from frame 0 to frame t + 1 (the
-    last action reaches the last frame); rotation and gripper entries are kept, so the grip holds.
-    """
-    if plan.ndim != 4 or last_action.ndim != 2 or last_action.shape[0] != plan.shape[0]:
-        raise ValueError(
-            f"Need plan (R, L, K, D) and last_action (R, A), got {tuple(plan.shape)} and {tuple(last_action.shape)}."
-        )
-    d = plan.shape[-1]
-    if last_action.shape[1] < d:
-        raise ValueError(
-            f"The action has {last_action.shape[1]} entries, fewer than the {d}-D position it must start with."
-        )
-    centre = plan.mean(2)  # (R, L, D)
-    frame = torch.arange(1, plan.shape[1] + 1, device=plan.device).clamp_max(plan.shape[1] - 1)
-    shift = (centre[:, frame] - centre[:, :1]).to(last_action.dtype)
-    out = last_action[:, None].repeat(1, plan.shape[1], 1)
-    out[..., :d] += shift
-    return out

@@ -1,12 +1,11 @@
-"""The `ocr_joint` policy: a frozen LeRobot base policy + Object-Centric Recovery.
+"""The `ocr_joint` policy: a frozen LeRobot base policy + Object-Centric Recovery (arXiv 2411.03294).
 
-Per batch row: object pose -> keypoints -> manifold score. A row whose score falls below the
-threshold switches to recovery: the manifold's recovery vector, the planner's keypoint trajectory
-(L frames) and the keypoint inverse policy give L actions, of which `n_recovery_action_steps` are
-executed (each held `recovery_action_repeat` env steps) before the row decides again. Other rows run
-the base. As in the paper, decisions are made at chunk boundaries: while every row is inside a base
-chunk nothing is checked (the step costs what the base costs); `check_every_step=True` checks every
-row at every step.
+Per step: observe (object pose -> keypoints -> manifold score and recovery vector, once for the
+batch) -> decide per row (`switch.decide`) -> plan a recovery chunk for the rows that need one
+(keypoint plan -> keypoint inverse policy) -> mix the base's actions with the recovery actions.
+A recovery chunk runs `n_recovery_action_steps` actions before its row decides again; rows on the
+base are checked when the base is about to plan its next chunk, as in the paper, so a step inside a
+base chunk costs what the base costs.
 
 The base sees every observation, also while a row recovers (its observation history stays right),
 and its queued actions are dropped whenever a row hands back to it, so it never executes a chunk
@@ -22,6 +21,7 @@ import json
 import logging
 import os
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -39,12 +39,23 @@ from lerobot_ocr.geometry import pose_to_matrix
 from lerobot_ocr.inverse_policy import KeypointInversePolicy
 from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
 from lerobot_ocr.manifold import KeypointManifold
-from lerobot_ocr.planner import RecoveryPlanner, carry_along_plan
+from lerobot_ocr.manifold import RecoveryOutput
+from lerobot_ocr.planner import RecoveryPlanner
 from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
+from lerobot_ocr.policies.ocr_joint.switch import SwitchState, advance, decide, needs_check
 
 BASE_DIR = "base"
 MODEL_FILE = "model.safetensors"
 KEYPOINTS_FILE = "object_keypoints.json"
+
+
+class Observed(NamedTuple):
+    """One step's observation as OCR sees it (B rows, world frame) and the manifold's verdict on it."""
+
+    frames: torch.Tensor  # (B, D+1, D+1) object poses
+    keypoints: torch.Tensor  # (B, K, D)
+    state: torch.Tensor  # (B, S) robot state
+    recovery: RecoveryOutput  # score (B,), recovery vector (B, D), ...
 
 
 class OcrJointPolicy(PreTrainedPolicy):
@@ -55,7 +66,8 @@ class OcrJointPolicy(PreTrainedPolicy):
     (`from_pretrained`, lerobot-eval) it loads them together with the bundled base policy.
 
     After a rollout, `ocr_stats()` says what it did (fraction of steps in recovery per row, the
-    score over time (NaN where no check was needed), recovery chunks, hand-backs).
+    score over time (NaN where no check was needed), recovery chunks, hand-backs); the stats of
+    earlier rollouts are in `completed_stats`.
     """
 
     config_class = OcrJointConfig
@@ -114,8 +126,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         )  # fmt: skip
         self.planner = RecoveryPlanner(
             horizon=config.horizon, step_size=config.step_size, d_min=config.d_min, d_max=config.d_max, normalize=True,
-            fixed_delay=config.fixed_delay, delay_countdown=config.delay_countdown, grasp_delay=config.grasp_delay,
-            follow_delay=config.follow_delay,
+            fixed_delay=config.fixed_delay,
         )  # fmt: skip
 
         bundled = Path(bundle_dir) / BASE_DIR if bundle_dir is not None else None
@@ -238,39 +249,31 @@ class OcrJointPolicy(PreTrainedPolicy):
 
     # ------------------------------------------------------------------------------ inference
     def reset(self):
-        """Start new episodes: clear the base's queues, the recovery state and the statistics."""
+        """Start new episodes: clear the base's queues and the switch; keep the last rollout's stats."""
+        self._archive_stats()
+        self.base.reset()
+        self._switch: SwitchState | None = None
+        self._chunk: torch.Tensor | None = None  # (B, n_recovery_action_steps, A) each row's recovery chunk
+
+    def _archive_stats(self) -> None:
         if getattr(self, "_scores", None):
             self.completed_stats.append(self.ocr_stats())
-        self.base.reset()
-        self._batch_size = None
-        self._any_recovering = False
         self._scores: list[torch.Tensor] = []
         self._modes: list[torch.Tensor] = []
-        self._n_chunks = 0
-        self._n_handbacks = 0
-        self._n_carried = 0
-        self._n_stalls = 0
-        self._n_followed = 0
+        self._n_chunks = self._n_handbacks = 0
 
-    def _init_rows(self, b: int, action_dim: int, device) -> None:
-        self._batch_size = b
-        self._recovering = torch.zeros(b, dtype=torch.bool, device=device)
-        self._returned = torch.zeros(b, dtype=torch.bool, device=device)
-        n = self.config.n_recovery_action_steps * self.config.recovery_action_repeat
-        self._rec_actions = torch.zeros(b, n, action_dim, device=device)
-        self._rec_left = torch.zeros(b, dtype=torch.long, device=device)
-        self._rec_count = torch.zeros(b, dtype=torch.long, device=device)  # chunks since the row entered recovery
-        d = self.config.object_dim
-        # end effector and object centre when the row's current recovery chunk began (`carry_tolerance`,
-        # `follow_delay`), and the object centre's planned shift over that chunk
-        self._chunk_ee = torch.zeros(b, d, device=device)
-        self._chunk_centre = torch.zeros(b, d, device=device)
-        self._chunk_shift = torch.zeros(b, d, device=device)
-        # the object's keypoints when each row's object last moved, and env steps since (`stall_steps`)
-        self._still_keypoints: torch.Tensor | None = None  # (B, K, D), set at the first check
-        self._still_steps = torch.zeros(b, dtype=torch.long, device=device)
+    def _start_rows(self, b: int, device: torch.device) -> None:
+        """A first step, or a batch of another size (a new rollout): every row starts on the base."""
+        if self._switch is not None and self._switch.batch_size == b:
+            return
+        if self._switch is not None:
+            self.reset()
+        action_dim = self.config.output_features[ACTION].shape[0]
+        self._switch = SwitchState.start(b, device)
+        self._chunk = torch.zeros(b, self.config.n_recovery_action_steps, action_dim, device=device)
 
-    def _observation(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def _observe(self, batch: dict[str, torch.Tensor]) -> Observed:
+        """Pose -> keypoints -> score and recovery vector (one manifold evaluation for the batch)."""
         cfg = self.config
         if cfg.object_pose_key not in batch:
             raise KeyError(
@@ -282,8 +285,9 @@ class OcrJointPolicy(PreTrainedPolicy):
         if pose.ndim == 1:
             pose = pose.unsqueeze(0)
         frames = self._pose_matrix(pose)  # rejects NaN/inf poses with a clear error
+        keypoints = self._keypoints(frames)
         state = batch[cfg.state_key].to(torch.float32).reshape(pose.shape[0], -1)
-        return frames, self._keypoints(frames), state
+        return Observed(frames, keypoints, state, self.manifold.recovery(keypoints.double(), magnitude=cfg.magnitude))
 
     def _distance(self, state: torch.Tensor, keypoints: torch.Tensor) -> torch.Tensor:
         """(B,) distance from the end effector to the nearest object keypoint (0 if unknown)."""
@@ -298,189 +302,78 @@ class OcrJointPolicy(PreTrainedPolicy):
         frames: torch.Tensor,
         keypoints: torch.Tensor,
         state: torch.Tensor,
+        vector: torch.Tensor | None = None,
         noise: torch.Tensor | None = None,
-        chunks: torch.Tensor | None = None,
-        grasped: torch.Tensor | None = None,
-        carrying: torch.Tensor | None = None,
-        last_action: torch.Tensor | None = None,
-        following: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Plan and sample one recovery chunk per row: world actions (R, L, A) and the plan (R, L, K, D).
+        """One recovery chunk per row: world actions (R, L, A) and the keypoint plan (R, L, K, D).
 
-        chunks: (R,) chunks each row already executed in this recovery (for `delay_countdown`).
-        grasped: (R,) bool, rows whose gripper holds the object (for `grasp_delay`).
-        carrying: (R,) bool, rows that carry the object along a plan that moves at once, shifting
-            their `last_action` (R, A) instead of sampling the inverse policy (`carry_tolerance`).
-        following: (R,) bool, rows whose previous chunk moved the object along its plan (`follow_delay`).
+        frames (R, D+1, D+1) object poses, keypoints (R, K, D), state (R, S), world frame;
+        vector: (R, D) recovery vectors (None: computed from the manifold); noise: the inverse
+        policy's initial noise (None: sampled).
         """
-        cfg = self.config
-        out = self.manifold.recovery(keypoints.double(), magnitude=cfg.magnitude)
-        vector = out.vector
-        weak = torch.linalg.vector_norm(vector, dim=-1) < 1e-9
-        if bool(weak.any()):  # deficit 0 on every keypoint yet OOD on average: fall back to the paper's direction
-            vector = vector.clone()
-            vector[weak] = self.manifold.recovery(keypoints[weak].double(), magnitude="paper").vector
-        vector = vector.to(keypoints.dtype)
-        plan = self.planner(keypoints, vector, self._distance(state, keypoints), chunks, grasped, following=following)
-        if carrying is None or not bool(carrying.any()):
-            return self.inverse.sample(plan, state, frames, noise=noise), plan
-        carry = carrying.to(plan.device)
-        plan[carry] = self.planner(keypoints[carry], vector[carry], None, delay=0)
-        actions = carry_along_plan(plan[carry], last_action[carry].to(plan.device, torch.float32))
-        actions = actions.new_zeros(plan.shape[0], *actions.shape[1:]).index_put_((carry,), actions)
-        if bool((~carry).any()):
-            rest = ~carry
-            rest_noise = None if noise is None else noise[rest]
-            sampled = self.inverse.sample(plan[rest], state[rest], frames[rest], noise=rest_noise)
-            actions[rest] = sampled.to(actions.dtype)
-        return actions, plan
+        if vector is None:
+            vector = self.manifold.recovery(keypoints.double(), magnitude=self.config.magnitude).vector
+        plan = self.planner(keypoints, vector.to(keypoints.dtype), self._distance(state, keypoints))
+        return self.inverse.sample(plan, state, frames, noise=noise), plan
 
-    def _carrying(
-        self, rows: torch.Tensor, grasped: torch.Tensor, state: torch.Tensor, keypoints: torch.Tensor
-    ) -> torch.Tensor:
-        """(R,) bool: rows whose gripper is closed and whose object moved with the end effector last chunk."""
-        tol = self.config.carry_tolerance
-        ee = state[:, self.config.ee_position_start : self.config.ee_position_start + keypoints.shape[-1]]
-        moved = keypoints.mean(1) - self._chunk_centre[rows]
-        with_ee = torch.linalg.vector_norm(moved - (ee - self._chunk_ee[rows]), dim=-1) < tol
-        return grasped & (torch.linalg.vector_norm(moved, dim=-1) > tol) & with_ee
+    def _plan_chunks(self, obs: Observed, rows: torch.Tensor, noise: torch.Tensor | None) -> None:
+        """Fill the chunk of the rows in the (B,) mask `rows` with the first n recovery actions."""
+        idx = rows.nonzero().squeeze(-1)
+        actions, _ = self.recovery_actions(
+            obs.frames[idx], obs.keypoints[idx], obs.state[idx], obs.recovery.vector[idx], noise=noise
+        )
+        self._chunk[idx] = actions[:, : self._chunk.shape[1]].to(self._chunk)
 
-    def _following(self, rows: torch.Tensor, keypoints: torch.Tensor) -> torch.Tensor:
-        """(R,) bool: rows whose last recovery chunk moved the object centre along its planned shift.
-
-        keypoints: (R, K, D) world frame, now. Progress is the move's projection on the planned shift,
-        as a share of it; it must reach `follow_fraction` (a plan that holds still is never followed).
-        """
-        shift = self._chunk_shift[rows]
-        planned = (shift * shift).sum(-1)
-        progress = ((keypoints.mean(1) - self._chunk_centre[rows]) * shift).sum(-1)
-        return (self._rec_count[rows] > 0) & (planned > 0) & (progress >= self.config.follow_fraction * planned)
-
-    def _stalled(self, keypoints: torch.Tensor) -> torch.Tensor:
-        """(B,) bool: rows on the base whose object has stayed put for `stall_steps` env steps.
-
-        keypoints: (B, K, D) world frame. Counts this step: a row whose keypoints moved more than
-        `stall_tolerance` from where they last moved, or that is recovering, restarts its count.
-        """
-        cfg = self.config
-        if cfg.stall_steps is None:
-            return torch.zeros(keypoints.shape[0], dtype=torch.bool, device=keypoints.device)
-        if self._still_keypoints is None:
-            self._still_keypoints = torch.full_like(keypoints, float("nan"))
-        drift = torch.linalg.vector_norm(keypoints - self._still_keypoints, dim=-1).amax(-1)
-        moved = ~(drift <= cfg.stall_tolerance) | self._recovering  # NaN anchors (first step) count as moved
-        self._still_keypoints[moved] = keypoints[moved]
-        self._still_steps = torch.where(moved, torch.zeros_like(self._still_steps), self._still_steps + 1)
-        return self._still_steps >= cfg.stall_steps
-
-    def _base_action(self, batch: dict[str, torch.Tensor], rows_on_base: torch.Tensor) -> torch.Tensor | None:
+    def _mix(self, batch: dict[str, torch.Tensor], device: torch.device) -> torch.Tensor:
+        """(B, A) actions: the base's for rows on the base, the current recovery action for the others."""
+        recovering = self._switch.recovering
         base_batch = self._base_pre(dict(batch))
-        if bool(rows_on_base.any()):
-            return self._base_post(self.base.select_action(base_batch))
-        observe_only(self.base, base_batch)  # history stays right; nothing planned for nobody
-        drop_queued_actions(self.base)
-        return None
+        if bool(recovering.all()):
+            observe_only(self.base, base_batch)  # history stays right; nothing planned for nobody
+            drop_queued_actions(self.base)
+            action = torch.zeros(self._chunk.shape[0], self._chunk.shape[2], device=device)
+        else:
+            action = self._base_post(self.base.select_action(base_batch)).to(device, torch.float32)
+        step = self._chunk.shape[1] - 1 - self._switch.actions_left
+        action[recovering] = self._chunk[recovering, step[recovering]]
+        return action
 
     @torch.no_grad()
     def select_action(self, batch: dict[str, torch.Tensor], noise: torch.Tensor | None = None) -> torch.Tensor:
-        """One action per row (B, A), world frame; `batch` is the env observation after our preprocessor."""
-        cfg = self.config
-        if (
-            not cfg.check_every_step
-            and self._batch_size is not None
-            and not self._any_recovering
-            and (queued_actions(self.base) or 0) > 0
-        ):  # every row is inside a base chunk: decisions wait for its end (as the paper's joint policy)
-            if cfg.stall_steps is not None:  # stalls still count every step
-                self._stalled(self._observation(batch)[1])
-            self._record(torch.full((self._batch_size,), float("nan")), self._recovering)
-            return self._base_post(self.base.select_action(self._base_pre(dict(batch))))
-        frames, keypoints, state = self._observation(batch)
-        b, device = frames.shape[0], frames.device
-        action_dim = cfg.output_features[ACTION].shape[0]
-        if self._batch_size != b:
-            self._init_rows(b, action_dim, device)
-        score = self.manifold.score(keypoints.double()).to(device)
-        threshold = float(self.manifold.threshold_)
-        ood = score < threshold
-        stalled = self._stalled(keypoints)
-        if not (self._any_recovering or bool(ood.any()) or bool(stalled.any())):  # all on the base, in distribution
-            self._record(score, self._recovering)
-            return self._base_post(self.base.select_action(self._base_pre(dict(batch)))).to(device)
+        """One action per row, (B, A) world frame, on the batch's device.
 
-        # Rows that finished their recovery chunk: hand back to the base if in distribution again.
-        done_chunk = self._recovering & (self._rec_left == 0)
-        handback = done_chunk & (score >= threshold + cfg.hysteresis)
-        self._recovering = self._recovering & ~handback  # new tensors: the history keeps the old ones
-        self._returned |= handback
-        # Rows on the base that left the distribution start recovering (unless latched), and stuck ones.
-        unstick = ~self._recovering & stalled
-        enter = ~self._recovering & ((ood & ~(self._returned & cfg.latch)) | unstick)
-        self._recovering = self._recovering | enter
-        self._rec_count[enter] = 0
-        self._still_steps[unstick] = 0
-        self._n_stalls += int(unstick.sum())
-        need_chunk = self._recovering & (self._rec_left == 0)
-
-        if bool(need_chunk.any()):
-            rows = need_chunk.nonzero().squeeze(-1)
-            # Holding the object = this recovery's previous chunk ended with a close command.
-            grasped = (self._rec_count[rows] > 0) & (self._rec_actions[rows, -1, cfg.gripper_action_index] > 0)
-            carrying = following = None
-            if cfg.carry_tolerance is not None:
-                carrying = self._carrying(rows, grasped, state[rows], keypoints[rows])
-                start = cfg.ee_position_start
-                self._chunk_ee[rows] = state[rows, start : start + keypoints.shape[-1]]
-            if cfg.follow_delay is not None:
-                following = self._following(rows, keypoints[rows])
-            self._chunk_centre[rows] = keypoints[rows].mean(1)
-            actions, plan = self.recovery_actions(
-                frames[rows], keypoints[rows], state[rows], noise=noise, chunks=self._rec_count[rows], grasped=grasped,
-                carrying=carrying, last_action=self._rec_actions[rows, -1], following=following,
-            )  # fmt: skip
-            if carrying is not None:
-                self._n_carried += int(carrying.sum())
-            if following is not None:
-                self._n_followed += int(following.sum())
-                # the centre's planned shift over the executed actions (frame n, as the last one reaches it)
-                executed = min(cfg.n_recovery_action_steps, plan.shape[1] - 1)
-                self._chunk_shift[rows] = (plan[:, executed] - plan[:, 0]).mean(1).to(self._chunk_shift.dtype)
-            self._rec_count[rows] += 1
-            chunk = actions[:, : cfg.n_recovery_action_steps].repeat_interleave(cfg.recovery_action_repeat, dim=1)
-            self._rec_actions[rows] = chunk.to(self._rec_actions.dtype)
-            self._rec_left[rows] = chunk.shape[1]
-            self._n_chunks += len(rows)
-        if bool(handback.any()):
+        `batch` is the env observation after our preprocessor; `noise` seeds the inverse policy's
+        sampling of any recovery chunk planned at this step. Raises KeyError / ValueError for a
+        missing or non-finite object pose.
+        """
+        state = batch[self.config.state_key]
+        b, device = (1 if state.ndim == 1 else state.shape[0]), state.device
+        self._start_rows(b, device)
+        obs = self._observe(batch) if needs_check(self._switch, queued_actions(self.base)) else None
+        score = obs.recovery.score.to(device) if obs else torch.full((b,), float("nan"), dtype=torch.float64, device=device)
+        decision = decide(score, float(self.manifold.threshold_), self._switch)
+        if bool(decision.needs_chunk.any()):
+            self._plan_chunks(obs, decision.needs_chunk, noise)
+        if bool(decision.hand_back.any()):
             drop_queued_actions(self.base)  # its queue was planned before or during the recovery
-            self._n_handbacks += int(handback.sum())
-
-        rec = self._recovering
-        base_action = self._base_action(batch, ~rec)
-        out = torch.zeros(b, action_dim, device=device)
-        if base_action is not None:
-            out[~rec] = base_action.to(device, out.dtype)[~rec]
-        if bool(rec.any()):
-            step = self._rec_actions.shape[1] - self._rec_left[rec]
-            out[rec] = self._rec_actions[rec, step]
-            self._rec_left[rec] -= 1
-        self._any_recovering = bool(rec.any())
-        self._record(score, rec)
-        return out
-
-    def _record(self, score: torch.Tensor, recovering: torch.Tensor) -> None:
+        self._switch = advance(self._switch, decision, self._chunk.shape[1])
+        self._n_chunks += int(decision.needs_chunk.sum())
+        self._n_handbacks += int(decision.hand_back.sum())
         self._scores.append(score.cpu())
-        self._modes.append(recovering.cpu())
+        self._modes.append(decision.recovering.cpu())
+        return self._mix(batch, device)
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, torch.Tensor], **kwargs) -> torch.Tensor:
         """A stateless chunk (B, n, A): recovery actions for OOD rows, the base's chunk for the others."""
-        frames, keypoints, state = self._observation(batch)
-        ood = self.manifold.score(keypoints.double()).to(frames.device) < float(self.manifold.threshold_)
+        obs = self._observe(batch)
+        ood = obs.recovery.is_ood.to(obs.frames.device)
         base_chunk = self._base_post(self.base.predict_action_chunk(self._base_pre(dict(batch))))
         n = min(self.config.n_recovery_action_steps, base_chunk.shape[1])
-        out = base_chunk[:, :n].to(frames.device, torch.float32).clone()
+        out = base_chunk[:, :n].to(obs.frames.device, torch.float32).clone()
         if bool(ood.any()):
-            out[ood] = self.recovery_actions(frames[ood], keypoints[ood], state[ood])[0][:, :n].to(out.dtype)
+            actions, _ = self.recovery_actions(obs.frames[ood], obs.keypoints[ood], obs.state[ood], obs.recovery.vector[ood])
+            out[ood] = actions[:, :n].to(out.dtype)
         return out
 
     def ocr_stats(self) -> dict:
@@ -498,9 +391,6 @@ class OcrJointPolicy(PreTrainedPolicy):
             "mean_recovery_fraction": float(modes.mean()),
             "recovery_chunks": self._n_chunks,
             "handbacks": self._n_handbacks,
-            "carried_chunks": self._n_carried,
-            "stalls": self._n_stalls,
-            "followed_chunks": self._n_followed,
             "score": scores,
             "in_recovery": modes,
         }

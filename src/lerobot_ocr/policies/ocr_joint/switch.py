@@ -1,0 +1,105 @@
+"""The OCR switch: per batch row, run the base policy or the recovery.
+
+The paper's joint policy (arXiv 2411.03294, "joint policy"): pi_joint = pi_b if eta_rec >= eps_rec,
+else pi_inv, with eta_rec the keypoints' density score and eps_rec the threshold (here: the manifold's
+`score` and its calibrated `threshold_`). As in the paper, a decision
+is taken at a chunk boundary: a recovering row re-decides once its recovery chunk has run, and rows
+on the base are checked when the base is about to plan its next chunk (or whenever another row of the
+batch is deciding, since the score is computed for the whole batch at once).
+
+This module is pure: `SwitchState` holds what the switch remembers per row, `decide` maps a score, the
+threshold and a state to a `Decision`, `advance` gives the state after the step. No policy, no
+networks: `OcrJointPolicy.select_action` scores, calls these, plans the chunks they ask for and mixes.
+Shapes: B = batch rows; tensors are 1-D (B,) on one device.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+
+@dataclass(frozen=True)
+class SwitchState:
+    """What the switch remembers per row between steps.
+
+    recovering: (B,) bool, the row runs the recovery policy.
+    actions_left: (B,) long, recovery actions of the current chunk still to execute (0: it needs a
+        decision, and a new chunk if it keeps recovering).
+    chunks: (B,) long, recovery chunks planned since the row last entered recovery.
+    handed_back: (B,) bool, the row has handed the object back to the base at least once.
+    """
+
+    recovering: torch.Tensor
+    actions_left: torch.Tensor
+    chunks: torch.Tensor
+    handed_back: torch.Tensor
+
+    @classmethod
+    def start(cls, batch_size: int, device: torch.device | str = "cpu") -> SwitchState:
+        """Every row on the base, nothing queued: the state at the start of an episode."""
+        false = torch.zeros(batch_size, dtype=torch.bool, device=device)
+        zero = torch.zeros(batch_size, dtype=torch.long, device=device)
+        return cls(recovering=false, actions_left=zero, chunks=zero, handed_back=false)
+
+    @property
+    def batch_size(self) -> int:
+        return self.recovering.shape[0]
+
+
+@dataclass(frozen=True)
+class Decision:
+    """The switch's decision for one step, per row (all (B,) bool).
+
+    recovering: the row runs the recovery policy at this step.
+    enter: the row leaves the base for the recovery at this step.
+    hand_back: the row returns to the base at this step (its recovery chunk has run and the object
+        is in distribution again).
+    needs_chunk: the row needs a new recovery chunk before it acts.
+    """
+
+    recovering: torch.Tensor
+    enter: torch.Tensor
+    hand_back: torch.Tensor
+    needs_chunk: torch.Tensor
+
+
+def needs_check(state: SwitchState | None, base_queued: int | None) -> bool:
+    """Whether this step needs the score: a new episode, a recovering row, or a base about to plan.
+
+    base_queued: actions the base will pop before it plans again (None: unknown, so always check).
+    """
+    return state is None or bool(state.recovering.any()) or not base_queued
+
+
+def decide(score: torch.Tensor, threshold: float, state: SwitchState) -> Decision:
+    """The switch for one step: (B,) scores (NaN = not evaluated), the threshold and the state -> Decision.
+
+    A row recovering whose chunk has run (`actions_left == 0`) hands back when score >= threshold;
+    a row on the base enters recovery when score < threshold; a recovering row with no action left
+    needs a new chunk. A NaN score decides nothing: the row keeps its mode.
+
+    Raises:
+        ValueError: `score` is not (B,) for the state's B rows.
+    """
+    if score.shape != state.recovering.shape:
+        raise ValueError(f"score has shape {tuple(score.shape)}, expected ({state.batch_size},) for the state's rows.")
+    score = score.to(state.recovering.device)
+    chunk_done = state.recovering & (state.actions_left == 0)
+    hand_back = chunk_done & (score >= threshold)
+    enter = ~state.recovering & (score < threshold)
+    recovering = (state.recovering & ~hand_back) | enter
+    return Decision(recovering, enter, hand_back, recovering & (state.actions_left == 0))
+
+
+def advance(state: SwitchState, decision: Decision, chunk_size: int) -> SwitchState:
+    """The state after this step: new chunks hold `chunk_size` actions, each recovering row executes one.
+
+    The recovery action a row executes at this step is its chunk's `chunk_size - 1 - actions_left`
+    (actions_left of the returned state).
+    """
+    left = torch.where(decision.needs_chunk, torch.full_like(state.actions_left, chunk_size), state.actions_left)
+    left = torch.where(decision.recovering, left - 1, left)
+    chunks = torch.where(decision.enter, torch.zeros_like(state.chunks), state.chunks) + decision.needs_chunk.long()
+    return SwitchState(decision.recovering, left, chunks, state.handed_back | decision.hand_back)

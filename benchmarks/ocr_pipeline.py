@@ -31,6 +31,7 @@ SRC = REPO / "src"
 # This clone's sources first: the cached virtualenv is shared by clones with the same lock file, and its
 # editable install points at whichever clone ran scripts/setup.sh last.
 sys.path[:0] = [str(HERE), str(SRC)]
+import summary  # noqa: E402
 from results_md import update_section  # noqa: E402
 
 BIN = Path(sys.executable).parent
@@ -56,11 +57,11 @@ class Task:
     lowdim_generate_args: tuple[str, ...] = ()  # `lerobot-ocr generate` flags that skip the cameras
     image_args: tuple[str, ...] = ()  # extra base training args for an image base
     eval_overrides: tuple[str, ...] = ()  # extra lerobot-eval args of every cell (the paper's protocol)
-    pictures: Callable[[Path, Path, dict, dict, Path], list[Path]] | None = None
+    pictures: Callable[..., list[Path]] | None = None  # (ocr_ckpt, converted, results, eval_dirs, out, env_args)
 
-    def generate_args(self, p: dict, root: Path) -> list[str]:
+    def generate_args(self, p: dict, root: Path, env_args: list[str]) -> list[str]:
         args = [str(BIN / "lerobot-ocr"), "generate", self.name, "--region", "id", "--episodes", str(p["demos"]),
-                "--root", str(root), "--repo-id", f"local/{self.name}_demos", "--seed", "0"]  # fmt: skip
+                "--root", str(root), "--repo-id", f"local/{self.name}_demos", "--seed", "0", *env_args]  # fmt: skip
         return args + list(self.lowdim_generate_args if p["base"] == "lowdim" else ())
 
 
@@ -121,14 +122,14 @@ def base_train_args(p: dict, data: Path, out: Path, task: Task | None = None, re
     return args
 
 
-def eval_args(task: Task, policy: Path, region: str, p: dict, out: Path) -> list[str]:
+def eval_args(task: Task, policy: Path, region: str, p: dict, out: Path, env_args: list[str] = ()) -> list[str]:
     obs = "environment_state_agent_pos" if p["base"] == "lowdim" else "pixels_agent_pos"
     return [
         str(BIN / "lerobot-ocr"), "eval", f"--policy.path={policy}", f"--env.type={task.env_type}", f"--env.region={region}",
         f"--env.obs_type={obs}", f"--eval.n_episodes={p['episodes']}", f"--eval.batch_size={p['eval_batch']}",
         f"--policy.device={p['device']}", f"--seed={EVAL_SEED}", f"--output_dir={out}",
         # CPU: one process; async workers would each spend ~10 s importing LeRobot on a 2-core machine.
-        f"--eval.use_async_envs={'true' if p['device'] != 'cpu' else 'false'}", *task.eval_overrides,
+        f"--eval.use_async_envs={'true' if p['device'] != 'cpu' else 'false'}", *task.eval_overrides, *env_args,
     ]  # fmt: skip
 
 
@@ -139,10 +140,12 @@ def success_chart(task: Task, results: dict, path: Path) -> Path:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    rates = [results[n]["success_rate"] for n in CELLS]
-    err = np.array([[r - results[n]["ci95"][0], results[n]["ci95"][1] - r] for n, r in zip(CELLS, rates)]).T
+    cells = [n for n in CELLS if n in results]
+    rates = [results[n]["success_rate"] for n in cells]
+    err = np.array([[r - results[n]["ci95"][0], results[n]["ci95"][1] - r] for n, r in zip(cells, rates)]).T
+    colors = dict(zip(CELLS, ["#7a9cc6", "#c67a7a", "#5aa05a", "#8fbf8f"]))
     fig, ax = plt.subplots(figsize=(5.6, 3.6), dpi=110)
-    ax.bar(CELLS, rates, yerr=err, capsize=4, color=["#7a9cc6", "#c67a7a", "#5aa05a", "#8fbf8f"])
+    ax.bar(cells, rates, yerr=err, capsize=4, color=[colors[n] for n in cells])
     ax.set_ylim(0, 1.05)
     ax.set_ylabel("success rate (95% interval)")
     ax.set_title(f"{task.title}, {results['base_ood']['n_episodes']} episodes per cell")
@@ -171,7 +174,14 @@ def parse_args(task: Task) -> argparse.Namespace:
     parser.add_argument("--restart", action="store_true", help="delete the work dir first")
     parser.add_argument("--no-update", action="store_true", help="do not write benchmarks/results or RESULTS.md")
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="override profile values, e.g. demos=50")
+    parser.add_argument(
+        "--env", nargs="*", default=[], metavar="FIELD=VALUE",
+        help=f"{task.env_type} env settings for the demos and every eval cell (as --env.FIELD=VALUE), e.g. region_axis=1",
+    )  # fmt: skip
     args = parser.parse_args()
+    if any(item.partition("=")[0] in ("region", "type", "obs_type") for item in args.env):
+        parser.error("--env: region, type and obs_type are set by the pipeline (per cell / per profile)")
+    args.env_args = [f"--env.{item}" for item in args.env]
     p = dict(task.profiles[args.profile])
     for item in args.set:
         key, _, value = item.partition("=")
@@ -195,7 +205,7 @@ def main(task: Task) -> None:
 
     demos, base_data, converted = work / "demos", work / "base_data", work / "converted"
     demos_repo, base_repo, ocr_repo = f"local/{task.name}_demos", f"local/{task.name}_base", f"local/{task.name}_ocr"
-    stage("demos", lambda: run(task.generate_args(p, demos), logs / "demos.log"))
+    stage("demos", lambda: run(task.generate_args(p, demos, args.env_args), logs / "demos.log"))
 
     def make_base_data():
         from lerobot.datasets import LeRobotDataset
@@ -250,6 +260,7 @@ def main(task: Task) -> None:
     from lerobot_ocr.eval_report import format_table, summarize
 
     cells = {"base_id": (base_ckpt, "id"), "base_ood": (base_ckpt, "ood"), "joint_ood": (ocr_ckpt, "ood"), "joint_id": (ocr_ckpt, "id")}
+    cells = {name: cell for name, cell in cells.items() if name in p.get("cells", CELLS)}
     results, eval_dirs = {}, {}
     for name, (ckpt, region) in cells.items():
         out = work / f"eval_{name}"
@@ -257,7 +268,7 @@ def main(task: Task) -> None:
 
         def evaluate(ckpt=ckpt, region=region, out=out, name=name):
             shutil.rmtree(out, ignore_errors=True)
-            run(eval_args(task, ckpt, region, p, out), logs / f"eval_{name}.log")
+            run(eval_args(task, ckpt, region, p, out, args.env_args), logs / f"eval_{name}.log")
             info = json.loads((out / "eval_info.json").read_text())
             ocr = json.loads((out / "ocr_stats.json").read_text()) if (out / "ocr_stats.json").exists() else None
             return summarize(info, ocr)
@@ -268,16 +279,21 @@ def main(task: Task) -> None:
     print("\n" + table)
     if args.no_update:
         return
-    figure_dir = HERE / "results" / f"{task.name}_{args.profile}"
+    publish = p.get("publish", True)  # a benchmark row; else (the demo) everything stays in the work dir
+    figure_dir = HERE / "results" / f"{task.name}_{args.profile}" if publish else work / "pictures"
     figure_dir.mkdir(parents=True, exist_ok=True)
     files = [success_chart(task, results, figure_dir / "success.png"), *copy_videos(task, eval_dirs, figure_dir)]
     if task.pictures is not None:
-        files += task.pictures(ocr_ckpt, converted, results, eval_dirs, figure_dir)
+        files += task.pictures(ocr_ckpt, converted, results, eval_dirs, figure_dir, args.env_args)
+    if not publish:
+        print(f"\nTotal {sum(stage.times.values()) / 60:.1f} min. Pictures and videos:", *files, sep="\n  ")
+        return
     files = [str(f.relative_to(REPO)) for f in files]
     payload = {
         "benchmark": f"{task.name}_ocr",
         "profile": args.profile,
         "settings": p,
+        "env": args.env,
         **results,
         "stage_seconds": stage.times,
         "total_seconds": sum(stage.times.values()),
@@ -287,6 +303,7 @@ def main(task: Task) -> None:
         "files": files,
     }
     (HERE / "results" / f"{task.name}_{args.profile}.json").write_text(json.dumps(payload, indent=2) + "\n")
+    summary.write()  # the summary atop RESULTS.md and in the README
     base_kind = task.lowdim_description if p["base"] == "lowdim" else "image base"
     stages_txt = ", ".join(f"{k} {v / 60:.1f} min" for k, v in stage.times.items())
     overrides = f" Overrides: `--set {' '.join(args.set)}`." if args.set else ""

@@ -19,6 +19,11 @@ import ocr_pipeline  # noqa: E402
 from ocr_pipeline import Task  # noqa: E402
 
 PROFILES = {
+    "demo": {  # the README's first command: the whole chain in minutes, the effect shows in reward, not success
+        "demos": 20, "base": "lowdim", "base_steps": 2500, "base_batch": 32, "base_dims": "[32,64,128]",
+        "ocr_steps": 1000, "ocr_batch": 32, "ocr_dims": "[32,64,128]", "episodes": 10, "eval_batch": 10,
+        "device": "cpu", "cells": ("base_ood", "joint_ood"), "publish": False,
+    },
     "quick": {
         "demos": 30, "base": "lowdim", "base_steps": 5000, "base_batch": 64, "base_dims": "[64,128,256]",
         "ocr_steps": 2000, "ocr_batch": 64, "ocr_dims": "[64,128,256]", "episodes": 10, "eval_batch": 10,
@@ -37,7 +42,7 @@ PROFILES = {
 }  # fmt: skip
 
 
-def pictures(ocr_ckpt: Path, converted: Path, results: dict, eval_dirs: dict, out: Path) -> list[Path]:
+def pictures(ocr_ckpt: Path, converted: Path, results: dict, eval_dirs: dict, out: Path, env_args: list[str]) -> list[Path]:
     """The density field of the T at 45° with recovery arrows."""
     import numpy as np
 

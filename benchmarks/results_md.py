@@ -6,15 +6,19 @@ import re
 from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "RESULTS.md"
-HEADER = "# Benchmark results\n\nEach section is written by the script named in it; re-run the command to refresh it.\n"
+HEADER = "# Benchmark results\n\nThe summary (benchmarks/summary.py), then one section per benchmark script; re-run its command to refresh it.\n"
 
 
-def update_section(title: str, body: str, path: Path = RESULTS) -> None:
+def update_section(title: str, body: str, path: Path = RESULTS, first: bool = False) -> None:
+    """Replace the section `## <title>` (or add it: at the end, or before every other section if `first`)."""
     text = path.read_text() if path.exists() else HEADER
     section = f"## {title}\n\n{body.strip()}\n"
     pattern = re.compile(rf"^## {re.escape(title)}\n.*?(?=^## |\Z)", re.S | re.M)
     if pattern.search(text):
         text = pattern.sub(lambda _: section + "\n", text, count=1)
+    elif first and re.search(r"^## ", text, re.M):
+        at = re.search(r"^## ", text, re.M).start()
+        text = text[:at] + section + "\n" + text[at:]
     else:
         text = text.rstrip("\n") + "\n\n" + section
     tmp = path.with_suffix(".tmp")

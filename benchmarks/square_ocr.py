@@ -31,12 +31,13 @@ PROFILES = {
 }  # fmt: skip
 
 
-def pictures(ocr_ckpt: Path, converted: Path, results: dict, eval_dirs: dict, out: Path) -> list[Path]:
+def pictures(ocr_ckpt: Path, converted: Path, results: dict, eval_dirs: dict, out: Path, env_args: list[str]) -> list[Path]:
     """The nut-position density (nut upright at its resting height, yaw 0) and frames of a recovery."""
     import numpy as np
 
+    from lerobot_ocr.cli import env_options
     from lerobot_ocr.dataset_columns import read_columns
-    from lerobot_ocr.envs.square_env import NutStartRegions
+    from lerobot_ocr.envs.configs import SquareOcrEnvConfig
     from lerobot_ocr.keypoints import resolve_keypoints
     from lerobot_ocr.plotting import plot_density_field, video_frame_strip
     from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
@@ -45,7 +46,7 @@ def pictures(ocr_ckpt: Path, converted: Path, results: dict, eval_dirs: dict, ou
     cols = read_columns(converted, ["observation.object_keypoints", "observation.object_pose"])
     kps = cols["observation.object_keypoints"].reshape(len(cols["observation.object_pose"]), -1, 3)
     rest_z = float(np.median(cols["observation.object_pose"][:, 2]))
-    r = NutStartRegions()
+    r = SquareOcrEnvConfig(**env_options("square", env_args)).nut_regions  # the boxes the run used
     ood_y = (r.id_y[0] + r.ood_dy[0], r.id_y[1] + r.ood_dy[1])
     files = [
         plot_density_field(

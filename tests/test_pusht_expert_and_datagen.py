@@ -97,3 +97,20 @@ def test_resume_refuses_other_settings(tmp_path):
     (work / "ledger.json").write_text('{"tried": {}, "params": {"region": "ood", "seed": 0}}')
     with pytest.raises(ValueError, match="same settings"):
         datagen.generate_pusht(tmp_path / "ds", episodes=1, region="id")
+
+
+def test_generate_takes_the_env_settings_lerobot_eval_takes(tmp_path):
+    """`lerobot-ocr generate pusht --env.<field>=<value>`: the same split flags as the env config."""
+    from lerobot_ocr.cli import main
+    from lerobot_ocr.dataset_columns import read_columns
+
+    root = tmp_path / "ds"
+    args = ["generate", "pusht", "--episodes", "1", "--root", str(root), "--no-videos", "--seed", "3",
+            "--env.region_axis=1", "--env.region_threshold=300", "--env.id_side=high"]  # fmt: skip
+    assert main(args) == 0
+    pose = read_columns(root, ["observation.object_pose"])["observation.object_pose"][0]
+    assert (block_keypoints(pose)[:, 1] >= 300.0 - 1e-3).all()  # ID = the T wholly below y = 300 (high side)
+    with pytest.raises(SystemExit, match="bad env setting"):
+        main(["generate", "pusht", "--root", str(tmp_path / "x"), "--env.no_such_field=1"])
+    with pytest.raises(SystemExit, match="unrecognized arguments"):
+        main(["generate", "pusht", "--root", str(tmp_path / "x"), "--bogus"])

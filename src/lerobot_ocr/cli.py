@@ -16,10 +16,36 @@ def _demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def _generate(args: argparse.Namespace) -> int:
+def env_options(task: str, args: list[str]) -> dict:
+    """`--env.<field>=<value>` flags (as lerobot-eval takes them) -> {field: value} for the task's env config.
+
+    Raises:
+        SystemExit: an argument that is not `--env.<field>=<value>`, or a field the env config lacks.
+    """
+    import draccus
+
+    from lerobot_ocr.envs.configs import PushtOcrEnvConfig, SquareOcrEnvConfig
+
+    cls = {"pusht": PushtOcrEnvConfig, "square": SquareOcrEnvConfig}[task]
+    bad = [a for a in args if not (a.startswith("--env.") and "=" in a)]
+    if bad:
+        raise SystemExit(f"lerobot-ocr generate: unrecognized arguments {bad}; env settings are --env.<field>=<value>.")
+    pairs = [a[len("--env.") :].split("=", 1) for a in args]
+    try:
+        cfg = draccus.parse(cls, args=[f"--{k}={v}" for k, v in pairs])
+    except BaseException as e:  # draccus exits on a bad field; say which config it belongs to
+        fields = sorted(f for f in cls.__dataclass_fields__ if not f.startswith("_"))
+        raise SystemExit(f"lerobot-ocr generate: bad env setting in {args}; {cls.__name__} fields: {fields}") from e
+    return {k: getattr(cfg, k) for k, _ in pairs}
+
+
+def _generate(args: argparse.Namespace, extra: list[str]) -> int:
+    options = env_options(args.task, extra)
+    region = options.pop("region", args.region)
     common = dict(
-        episodes=args.episodes, region=args.region, repo_id=args.repo_id or f"local/{args.task}_ocr", seed=args.seed,
+        episodes=args.episodes, region=region, repo_id=args.repo_id or f"local/{args.task}_ocr", seed=args.seed,
         use_videos=not args.no_videos, push_to_hub=args.push_to_hub, private=args.private, keep_work=args.keep_work,
+        env_options=options,
     )  # fmt: skip
     if args.task == "pusht":
         from lerobot_ocr.datagen.pusht import generate_pusht
@@ -76,7 +102,10 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--seed", type=int, default=0)
     demo.set_defaults(func=_demo)
 
-    gen = sub.add_parser("generate", help="Generate scripted-expert demonstrations as a LeRobotDataset.")
+    gen = sub.add_parser(
+        "generate",
+        help="Generate scripted-expert demonstrations as a LeRobotDataset; other env settings as --env.<field>=<value>.",
+    )
     gen.add_argument("task", choices=["pusht", "square"], help="Which task (square needs the [square] extra).")
     gen.add_argument("--region", choices=["id", "ood", "all"], default="id", help="Start region of the demos.")
     gen.add_argument("--episodes", type=int, default=100, help="Successful episodes to keep (paper: 100 Push-T, 200 Square).")
@@ -123,7 +152,12 @@ def main(argv: list[str] | None = None) -> int:
     if argv[:1] == ["eval"] and not {"-h", "--help"} & set(argv[1:]):
         # lerobot-eval's own `--key=value` flags pass through untouched (argparse would claim them).
         return _eval(argparse.Namespace(lerobot_eval_args=argv[1:]))
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args, extra = parser.parse_known_args(argv)
+    if args.command == "generate":
+        return args.func(args, extra)
+    if extra:
+        parser.error(f"unrecognized arguments: {' '.join(extra)}")
     return args.func(args)
 
 

@@ -18,7 +18,6 @@ in `<output>.work/` as they come, so an interrupted conversion resumes.
 
 from __future__ import annotations
 
-import importlib
 import json
 import shutil
 from collections.abc import Callable
@@ -27,11 +26,12 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from lerobot_ocr.callables import load_callable
+from lerobot_ocr.constants import OBS_OBJECT_KEYPOINTS, OBS_OBJECT_POSE
 from lerobot_ocr.dataset_columns import read_columns
 from lerobot_ocr.files import atomic_save_npy
 from lerobot_ocr.geometry import matrix_to_pose, pose_size, pose_to_matrix
 from lerobot_ocr.keypoints import keypoints_to_pose, pose_to_keypoints, resolve_keypoints
-from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OBS_OBJECT_KEYPOINTS, OBS_OBJECT_POSE
 
 POSE_NAMES = {
     "angle": ["x", "y", "theta"],
@@ -41,17 +41,6 @@ POSE_NAMES = {
     "rot6d": ["x", "y", "z", "r00", "r01", "r02", "r10", "r11", "r12"],
 }
 _CACHE_EVERY = 256
-
-
-def load_callable(spec: str) -> Callable:
-    """"package.module:function" -> the function."""
-    module, _, name = spec.partition(":")
-    if not module or not name:
-        raise ValueError(f"Estimator must be 'package.module:function', got {spec!r}.")
-    try:
-        return getattr(importlib.import_module(module), name)
-    except (ImportError, AttributeError) as e:
-        raise ValueError(f"Cannot load estimator {spec!r}: {e}") from e
 
 
 def _feature_info(features: dict, name: str, repo_id: str) -> dict:
@@ -127,7 +116,7 @@ def compute_object_poses(
     `columns` holds the source feature's column (see `source_feature`), read with `read_columns`.
     """
     if callable(pose_from) or str(pose_from).startswith("estimator:"):
-        fn = pose_from if callable(pose_from) else load_callable(str(pose_from).split(":", 1)[1])
+        fn = pose_from if callable(pose_from) else load_callable(str(pose_from).split(":", 1)[1], "estimator")
         return _poses_from_estimator(dataset, fn, rotation, work)
     kind, _, name = str(pose_from).partition(":")
     values = columns[name].astype(np.float64).reshape(len(columns[name]), -1)

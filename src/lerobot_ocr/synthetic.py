@@ -8,11 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from lerobot_ocr.constants import PUSHT_GOAL_POSE
 from lerobot_ocr.geometry import pose_to_matrix
 from lerobot_ocr.keypoints import PUSHT_T_KEYPOINTS, pose_to_keypoints
-
-PUSHT_GOAL_POSE = np.array([256.0, 256.0, np.pi / 4])
-
 
 def synthetic_pusht_poses(
     n_episodes: int = 50,

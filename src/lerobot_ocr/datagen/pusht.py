@@ -17,12 +17,13 @@ import numpy as np
 from lerobot_ocr.datagen.recording import (
     build_dataset,
     collect_episodes,
+    env_settings,
     episode_arrays,
     episode_frames,
     finish,
     work_dir,
 )
-from lerobot_ocr.envs.configs import PUSHT_TASK as TASK
+from lerobot_ocr.constants import PUSHT_TASK as TASK
 from lerobot_ocr.experts.rollout import rollout
 
 FPS = 10
@@ -76,20 +77,28 @@ def generate_pusht(
     private: bool = False,
     keep_work: bool = False,
     max_attempts: int | None = None,
+    env_options: dict | None = None,
 ):
     """Generate `episodes` successful expert demonstrations starting in `region`; return the dataset.
 
     Attempt j uses env seed `seed + j`; failed attempts are skipped (only successes are kept).
+    env_options: other `pusht_ocr` env settings (`PushtOcrEnvConfig` fields, e.g. {"region_axis": 1,
+    "region_threshold": 200.0}), as `--env.<field>=<value>` gives them to lerobot-eval.
+    Raises:
+        TypeError: an unknown env option. ValueError: a work dir made with other settings.
     """
+    from lerobot_ocr.envs.configs import PushtOcrEnvConfig
     from lerobot_ocr.envs.pusht_env import make_pusht_ocr_env
     from lerobot_ocr.experts.pusht_expert import PushTExpert
 
     root = Path(root)
+    options = env_settings(env_options)
+    env_cfg = PushtOcrEnvConfig(**{**options, "region": region, "obs_type": "pixels_agent_pos"})
     work = work_dir(root)
-    env = make_pusht_ocr_env(region=region, obs_type="pixels_agent_pos")
+    env = make_pusht_ocr_env(**{k: v for k, v in env_cfg.gym_kwargs.items() if k != "max_episode_steps"})
     expert = PushTExpert(seed=seed)
     paths = collect_episodes(
-        work, {"region": region, "seed": seed}, episodes, seed, lambda s: record_episode(env, expert, s),
+        work, {"region": region, "seed": seed, **options}, episodes, seed, lambda s: record_episode(env, expert, s),
         desc=f"Push-T expert demos ({region})", max_attempts=max_attempts,
     )  # fmt: skip
     env.close()

@@ -29,6 +29,19 @@ def work_dir(root: Path) -> Path:
     return work
 
 
+def env_settings(options: dict | None) -> dict:
+    """Env options as JSON values (tuples become lists), so that a resumed run compares them equal.
+
+    Raises:
+        ValueError: `region` or `obs_type` among them (the generator sets those itself).
+    """
+    options = json.loads(json.dumps(options or {}))
+    for key in ("region", "obs_type"):
+        if key in options:
+            raise ValueError(f"env option {key!r} is set by the generator (use --region / --no-images), not --env.{key}.")
+    return options
+
+
 def _save_episode(path: Path, seed: int, data: dict[str, np.ndarray]) -> None:
     with open(path, "wb") as f:  # a file object: np.savez would append .npz to the .tmp name
         np.savez_compressed(f, seed=seed, **data)

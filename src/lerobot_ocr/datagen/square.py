@@ -18,12 +18,13 @@ import numpy as np
 from lerobot_ocr.datagen.recording import (
     build_dataset,
     collect_episodes,
+    env_settings,
     episode_arrays,
     episode_frames,
     finish,
     work_dir,
 )
-from lerobot_ocr.envs.configs import SQUARE_TASK as TASK
+from lerobot_ocr.constants import SQUARE_TASK as TASK
 from lerobot_ocr.experts.rollout import rollout
 
 FPS = 20
@@ -77,22 +78,30 @@ def generate_square(
     private: bool = False,
     keep_work: bool = False,
     max_attempts: int | None = None,
+    env_options: dict | None = None,
 ):
     """Generate `episodes` successful expert demonstrations with the nut starting in `region`.
 
     Attempt j uses env seed `seed + j`; failed attempts are skipped. `images=False` records the
-    low-dim observations only (no cameras rendered: several times faster).
+    low-dim observations only (no cameras rendered: several times faster). env_options: other
+    `square_ocr` env settings (`SquareOcrEnvConfig` fields, e.g. the nut boxes {"id_y": (0.1, 0.2)}),
+    as `--env.<field>=<value>` gives them to lerobot-eval.
+    Raises:
+        TypeError: an unknown env option. ValueError: a work dir made with other settings.
     """
+    from lerobot_ocr.envs.configs import SquareOcrEnvConfig
     from lerobot_ocr.envs.square_env import make_square_ocr_env
     from lerobot_ocr.experts.square_expert import SquareExpert
 
     root = Path(root)
-    work = work_dir(root)
+    options = env_settings(env_options)
     obs_type = "pixels_agent_pos" if images else "environment_state_agent_pos"
-    env = make_square_ocr_env(obs_type=obs_type, region=region, render_mode=None)
+    env_cfg = SquareOcrEnvConfig(**{**options, "region": region, "obs_type": obs_type})
+    work = work_dir(root)
+    env = make_square_ocr_env(obs_type=obs_type, region=region, regions=env_cfg.nut_regions, render_mode=None)
     expert = SquareExpert(seed=seed)
     paths = collect_episodes(
-        work, {"region": region, "seed": seed, "images": images}, episodes, seed,
+        work, {"region": region, "seed": seed, "images": images, **options}, episodes, seed,
         lambda s: record_episode(env, expert, s), desc=f"Square expert demos ({region})", max_attempts=max_attempts,
     )  # fmt: skip
     env.close()

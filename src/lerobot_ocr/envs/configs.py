@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from functools import partial
 
 import gymnasium as gym
@@ -10,9 +10,8 @@ from lerobot.configs import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGE, OBS_IMAGES, OBS_STATE
 
-OBS_OBJECT_POSE = "observation.object_pose"
-PUSHT_TASK = "Push the T-shaped block onto the T-shaped target."
-SQUARE_TASK = "Pick up the square nut and place it over the square peg."
+from lerobot_ocr.constants import OBS_OBJECT_POSE
+from lerobot_ocr.envs.regions import REGIONS, NutStartRegions
 
 
 def _vector_env(factory, n_envs: int, use_async_envs: bool) -> gym.vector.VectorEnv:
@@ -72,8 +71,8 @@ class PushtOcrEnvConfig(EnvConfig):
     )
 
     def __post_init__(self):
-        if self.region not in ("id", "ood", "all"):
-            raise ValueError(f"--env.region must be 'id', 'ood' or 'all', got {self.region!r}.")
+        if self.region not in REGIONS:
+            raise ValueError(f"--env.region must be one of {REGIONS}, got {self.region!r}.")
         if self.obs_type == "pixels_agent_pos":
             self.features["pixels"] = PolicyFeature(
                 type=FeatureType.VISUAL, shape=(self.observation_height, self.observation_width, 3)
@@ -108,7 +107,7 @@ class PushtOcrEnvConfig(EnvConfig):
 
 def _make_square_ocr(kwargs: dict):
     # Module-level factory (picklable); imports robosuite only here, robosuite builds its sim on reset.
-    from lerobot_ocr.envs.square_env import NutStartRegions, make_square_ocr_env
+    from lerobot_ocr.envs.square_env import make_square_ocr_env
 
     kwargs = dict(kwargs)
     kwargs["regions"] = NutStartRegions(**kwargs["regions"])
@@ -135,10 +134,10 @@ class SquareOcrEnvConfig(EnvConfig):
     obs_type: str = "environment_state_agent_pos"
     render_mode: str = "rgb_array"
     region: str = "ood"
-    id_x: tuple[float, float] = (-0.115, -0.11)
-    id_y: tuple[float, float] = (0.11, 0.225)
-    ood_dx: tuple[float, float] = (-0.01, 0.01)
-    ood_dy: tuple[float, float] = (-0.35, -0.20)
+    id_x: tuple[float, float] = NutStartRegions.id_x
+    id_y: tuple[float, float] = NutStartRegions.id_y
+    ood_dx: tuple[float, float] = NutStartRegions.ood_dx
+    ood_dy: tuple[float, float] = NutStartRegions.ood_dy
     observation_size: int = 84
     visualization_size: int = 256
     features: dict[str, PolicyFeature] = field(
@@ -159,8 +158,8 @@ class SquareOcrEnvConfig(EnvConfig):
     )
 
     def __post_init__(self):
-        if self.region not in ("id", "ood", "all"):
-            raise ValueError(f"--env.region must be 'id', 'ood' or 'all', got {self.region!r}.")
+        if self.region not in REGIONS:
+            raise ValueError(f"--env.region must be one of {REGIONS}, got {self.region!r}.")
         if self.obs_type == "pixels_agent_pos":
             image = PolicyFeature(type=FeatureType.VISUAL, shape=(self.observation_size, self.observation_size, 3))
             self.features["pixels/agentview"] = image
@@ -173,11 +172,16 @@ class SquareOcrEnvConfig(EnvConfig):
             )
 
     @property
+    def nut_regions(self) -> NutStartRegions:
+        """The nut start boxes these settings describe."""
+        return NutStartRegions(tuple(self.id_x), tuple(self.id_y), tuple(self.ood_dx), tuple(self.ood_dy))
+
+    @property
     def gym_kwargs(self) -> dict:
         return {
             "obs_type": self.obs_type,
             "region": self.region,
-            "regions": {"id_x": tuple(self.id_x), "id_y": tuple(self.id_y), "ood_dx": tuple(self.ood_dx), "ood_dy": tuple(self.ood_dy)},
+            "regions": asdict(self.nut_regions),
             "observation_size": self.observation_size,
             "render_mode": self.render_mode,
             "visualization_size": self.visualization_size,

@@ -14,7 +14,7 @@ from gym_pusht.envs.pusht import PushTEnv
 from gymnasium import spaces
 from gymnasium.wrappers import TimeLimit
 
-from lerobot_ocr.envs.configs import PUSHT_TASK
+from lerobot_ocr.constants import PUSHT_TASK
 from lerobot_ocr.envs.regions import AxisSplit, accepts, load_region_fn
 from lerobot_ocr.keypoints import PUSHT_T_KEYPOINTS, pose_to_keypoints
 

@@ -1,17 +1,21 @@
-"""In-distribution / out-of-distribution start regions, decided on the object's world keypoints.
+"""In-distribution / out-of-distribution start regions: Push-T's split of the T's keypoints, Square's nut boxes.
 
 The paper's Push-T split: ID = every T keypoint has x <= 256 (left half), OOD = every keypoint has
 x >= 256; starts that straddle the line belong to neither. A user can move the line (axis,
 threshold, which side is ID) or give any predicate as "package.module:function".
+
+Square (the reference code's protocol): ID = robosuite's default nut box, OOD = an ID start shifted
+by a random (dx, dy); `NutStartRegions` holds the boxes (world metres).
 """
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
+from lerobot_ocr.callables import load_callable
 
 REGIONS = ("id", "ood", "all")
 
@@ -40,17 +44,12 @@ class AxisSplit:
 
 
 def load_region_fn(path: str) -> Callable[[np.ndarray, np.ndarray], str]:
-    """Import a user predicate "package.module:function" with signature fn(pose, keypoints) -> "id" | "ood" | other."""
-    module, sep, name = path.partition(":")
-    if not sep or not module or not name:
-        raise ValueError(f"region_fn must look like 'package.module:function', got {path!r}.")
-    try:
-        fn = getattr(importlib.import_module(module), name)
-    except (ImportError, AttributeError) as e:
-        raise ValueError(f"Cannot import region_fn {path!r}: {e}") from e
-    if not callable(fn):
-        raise ValueError(f"region_fn {path!r} is not callable.")
-    return fn
+    """Import a user predicate "package.module:function" with signature fn(pose, keypoints) -> "id" | "ood" | other.
+
+    Raises:
+        ValueError: the path is malformed, cannot be imported, or is not callable.
+    """
+    return load_callable(path, "region_fn")
 
 
 def accepts(region: str, label: str) -> bool:
@@ -58,3 +57,29 @@ def accepts(region: str, label: str) -> bool:
     if region not in REGIONS:
         raise ValueError(f"Unknown region {region!r}; use one of {REGIONS}.")
     return region == "all" or label == region
+
+
+@dataclass(frozen=True)
+class NutStartRegions:
+    """Nut start boxes (world metres): ID box and the OOD shift applied to an ID sample."""
+
+    id_x: tuple[float, float] = (-0.115, -0.11)
+    id_y: tuple[float, float] = (0.11, 0.225)
+    ood_dx: tuple[float, float] = (-0.01, 0.01)
+    ood_dy: tuple[float, float] = (-0.35, -0.20)
+
+    def sample(self, rng: np.random.Generator, region: str) -> tuple[np.ndarray, str]:
+        """One nut start: ((x, y, yaw), label) with label "id" or "ood"."""
+        if region not in REGIONS:
+            raise ValueError(f"region must be one of {REGIONS}, got {region!r}.")
+        label = region if region != "all" else ("id" if rng.random() < 0.5 else "ood")
+        x, y, yaw = rng.uniform(*self.id_x), rng.uniform(*self.id_y), rng.uniform(-np.pi, np.pi)
+        if label == "ood":
+            x, y = x + rng.uniform(*self.ood_dx), y + rng.uniform(*self.ood_dy)
+        return np.array([x, y, yaw]), label
+
+    def classify(self, xy: np.ndarray, tol: float = 1e-6) -> str:
+        """"id" if a nut (x, y) lies in the ID box, else "ood"."""
+        x, y = float(xy[0]), float(xy[1])
+        inside = self.id_x[0] - tol <= x <= self.id_x[1] + tol and self.id_y[0] - tol <= y <= self.id_y[1] + tol
+        return "id" if inside else "ood"

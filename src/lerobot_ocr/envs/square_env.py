@@ -20,48 +20,18 @@ World frame = robosuite's (metres; table top at z = 0.82, square peg at (0.23, 0
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from lerobot_ocr.envs.configs import SQUARE_TASK
+from lerobot_ocr.constants import SQUARE_TASK
+from lerobot_ocr.envs.regions import REGIONS, NutStartRegions
 from lerobot_ocr.geometry.rotations import (
     matrix_to_axis_angle,
     matrix_to_rotation_6d,
     quaternion_to_matrix,
     rotation_6d_to_matrix,
 )
-
-REGIONS = ("id", "ood", "all")
-
-
-@dataclass(frozen=True)
-class NutStartRegions:
-    """Nut start boxes (world metres): ID box and the OOD shift applied to an ID sample."""
-
-    id_x: tuple[float, float] = (-0.115, -0.11)
-    id_y: tuple[float, float] = (0.11, 0.225)
-    ood_dx: tuple[float, float] = (-0.01, 0.01)
-    ood_dy: tuple[float, float] = (-0.35, -0.20)
-
-    def sample(self, rng: np.random.Generator, region: str) -> tuple[np.ndarray, str]:
-        """One nut start: ((x, y, yaw), label) with label "id" or "ood"."""
-        if region not in REGIONS:
-            raise ValueError(f"region must be one of {REGIONS}, got {region!r}.")
-        label = region if region != "all" else ("id" if rng.random() < 0.5 else "ood")
-        x, y, yaw = rng.uniform(*self.id_x), rng.uniform(*self.id_y), rng.uniform(-np.pi, np.pi)
-        if label == "ood":
-            x, y = x + rng.uniform(*self.ood_dx), y + rng.uniform(*self.ood_dy)
-        return np.array([x, y, yaw]), label
-
-    def classify(self, xy: np.ndarray, tol: float = 1e-6) -> str:
-        """"id" if a nut (x, y) lies in the ID box, else "ood"."""
-        x, y = float(xy[0]), float(xy[1])
-        inside = self.id_x[0] - tol <= x <= self.id_x[1] + tol and self.id_y[0] - tol <= y <= self.id_y[1] + tol
-        return "id" if inside else "ood"
-
 
 def pose_to_action(pos: np.ndarray, rotation: np.ndarray, gripper: float) -> np.ndarray:
     """World eef position (3,), rotation matrix (3, 3) and gripper command -> action (10,)."""

@@ -17,10 +17,10 @@ import numpy as np
 from gym_pusht.envs.pusht import PushTEnv
 from pymunk.vec2d import Vec2d
 
+from lerobot_ocr.constants import PUSHT_GOAL_POSE
 from lerobot_ocr.envs.pusht_env import block_keypoints
 from lerobot_ocr.experts.rollout import rollout
 
-GOAL_POSE = np.array([256.0, 256.0, np.pi / 4])
 AGENT_RADIUS = 15.0
 COM_LOCAL = np.array([0.0, 45.0])
 # T boxes in the object frame: (xmin, xmax, ymin, ymax)
@@ -45,7 +45,7 @@ def _rot(theta: float) -> np.ndarray:
 
 def pose_error(block_pose: np.ndarray) -> float:
     """Mean distance (px) between the T's keypoints at `block_pose` and at the goal."""
-    return float(np.linalg.norm(block_keypoints(block_pose) - block_keypoints(GOAL_POSE), axis=-1).mean())
+    return float(np.linalg.norm(block_keypoints(block_pose) - block_keypoints(PUSHT_GOAL_POSE), axis=-1).mean())
 
 
 def distance_to_t(block_pose: np.ndarray, points: np.ndarray) -> np.ndarray:

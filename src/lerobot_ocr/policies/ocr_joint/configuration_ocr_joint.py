@@ -8,12 +8,11 @@ from lerobot.configs import NormalizationMode, PreTrainedConfig
 from lerobot.optim import AdamConfig, DiffuserSchedulerConfig
 from lerobot.utils.constants import ACTION, OBS_STATE
 
+from lerobot_ocr.constants import OBS_OBJECT_POSE
 from lerobot_ocr.geometry import pose_dim, pose_size
 from lerobot_ocr.manifold import MAGNITUDE_TYPES, SCORE_TYPES
 from lerobot_ocr.object_frame import FrameSpec
 
-OBS_OBJECT_POSE = "observation.object_pose"
-OBS_OBJECT_KEYPOINTS = "observation.object_keypoints"
 
 
 @PreTrainedConfig.register_subclass("ocr_joint")

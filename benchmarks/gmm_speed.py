@@ -79,7 +79,8 @@ def main() -> None:
         "keypoints": manifold.n_keypoints,
         "components": manifold.n_components,
         "date": dt.date.today().isoformat(),
-        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, torch {torch.__version__}",
+        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"torch {torch.__version__}",
     }
     for batch in (1, 64):
         x = torch.from_numpy(train[rng.choice(len(train), batch)] + rng.normal(scale=30, size=(batch, 9, 2)))
@@ -102,17 +103,19 @@ def main() -> None:
         b1, b64 = results["batch1"], results["batch64"]
         body = "\n".join(
             [
-                f"Density + recovery vector, {results['keypoints']} keypoints x {results['components']} components "
-                "(float64), ours (closed form, one vectorised pass) vs the reference style (MultivariateNormal "
-                "objects per call, `backward()` per keypoint). Both give the same numbers (checked in the run).",
+                f"Density + recovery vector, {results['keypoints']} keypoints x {results['components']} "
+                "components (float64), ours (closed form, one vectorised pass) vs the reference style "
+                "(MultivariateNormal objects per call, `backward()` per keypoint). Both give the same "
+                "numbers (checked in the run).",
                 "",
                 "| batch | ours (µs/call) | naive (µs/call) | speed-up | ours per query (µs) |",
                 "|---|---|---|---|---|",
                 f"| 1 | {b1['ours_us']} | {b1['naive_us']} | {b1['speedup']}× | {b1['ours_us_per_query']} |",
-                f"| 64 | {b64['ours_us']} | {b64['naive_us']} | {b64['speedup']}× | {b64['ours_us_per_query']} |",
+                f"| 64 | {b64['ours_us']} | {b64['naive_us']} | {b64['speedup']}× | "
+                f"{b64['ours_us_per_query']} |",
                 "",
-                "Targets: ≥ 50× at batch 1, ≤ 100 µs per query. "
-                f"Machine: {results['machine']}. Date: {results['date']}.",
+                f"Targets: ≥ 50× at batch 1, ≤ 100 µs per query. Machine: {results['machine']}. Date: "
+                f"{results['date']}.",
                 "",
                 "Command: `.venv/bin/python benchmarks/gmm_speed.py`",
                 "",

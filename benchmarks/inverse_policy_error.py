@@ -54,7 +54,9 @@ def window_errors(policy, windows: dict, executed: int, inference_steps: int | N
         "executed_error_median": float(err[:, :executed][valid[:, :executed]].median()),
         "hold_ee_error": float(floor[:, :executed][valid[:, :executed]].mean()),
     }
-    if actions.shape[-1] > FrameSpec.parse(cfg.action_frame).world_size(d):  # a gripper command after the pose
+    if actions.shape[-1] > FrameSpec.parse(cfg.action_frame).world_size(
+        d
+    ):  # a gripper command after the pose
         wrong = torch.sign(actions[..., -1]) != torch.sign(windows["actions"][..., -1])
         out["gripper_mismatch"] = float(wrong[:, :executed][valid[:, :executed]].float().mean())
     return out
@@ -63,14 +65,26 @@ def window_errors(policy, windows: dict, executed: int, inference_steps: int | N
 def main() -> None:
     from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
 
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--dataset", required=True, help="root of the converted dataset the checkpoints trained on")
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "--dataset", required=True, help="root of the converted dataset the checkpoints trained on"
+    )
     parser.add_argument("--checkpoint", action="append", required=True, help="LABEL=pretrained_model folder")
     parser.add_argument("--windows", type=int, default=400)
-    parser.add_argument("--executed", type=int, default=8, help="actions per recovery chunk that the robot executes")
-    parser.add_argument("--steps", type=int, nargs="*", default=[0], help="denoising steps (0 = the checkpoint's)")
+    parser.add_argument(
+        "--executed", type=int, default=8, help="actions per recovery chunk that the robot executes"
+    )
+    parser.add_argument(
+        "--steps", type=int, nargs="*", default=[0], help="denoising steps (0 = the checkpoint's)"
+    )
     parser.add_argument("--title", default="Inverse policy precision")
-    parser.add_argument("--no-update", action="store_true", help="print the rows only: write neither results/inverse_policy_error.json nor RESULTS.md")
+    parser.add_argument(
+        "--no-update",
+        action="store_true",
+        help="print the rows only: write neither results/inverse_policy_error.json nor RESULTS.md",
+    )
     args = parser.parse_args()
     torch.set_num_threads(1)
 
@@ -81,27 +95,40 @@ def main() -> None:
             raise SystemExit(f"--checkpoint wants LABEL=PATH, got {spec!r}.")
         policy = OcrJointPolicy.from_pretrained(path)
         policy._load_training_table(args.dataset)
-        starts = torch.randperm(len(policy._tbl_index), generator=torch.Generator().manual_seed(1))[: args.windows]
+        starts = torch.randperm(len(policy._tbl_index), generator=torch.Generator().manual_seed(1))[
+            : args.windows
+        ]
         windows = policy._windows(starts)
         for steps in args.steps:
-            row = {"checkpoint": label, "path": path, **window_errors(policy, windows, args.executed, steps or None)}
+            row = {
+                "checkpoint": label,
+                "path": path,
+                **window_errors(policy, windows, args.executed, steps or None),
+            }
             print(json.dumps(row), flush=True)
             rows.append(row)
 
     command = "`.venv/bin/python benchmarks/inverse_policy_error.py " + shlex.join(sys.argv[1:]) + "`"
-    result = {"rows": rows, "windows": args.windows, "executed": args.executed, "command": command,
-              "date": dt.date.today().isoformat(), "machine": f"{platform.machine()}, {os.cpu_count()} cores"}  # fmt: skip
+    result = {
+        "rows": rows,
+        "windows": args.windows,
+        "executed": args.executed,
+        "command": command,
+        "date": dt.date.today().isoformat(),
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+    }
     if not args.no_update:
         (HERE / "results" / "inverse_policy_error.json").write_text(json.dumps(result, indent=2))
     has_grip = any("gripper_mismatch" in r for r in rows)
     lines = [
-        f"{args.windows} random training windows of `{args.dataset}`; the inverse policy samples the actions of each "
-        f"window from its demo keypoint trajectory and state. Errors are world-frame end-effector target distances (the "
-        f"action's units) over the first {args.executed} actions (what a recovery chunk executes); \"hold ee\" is the error of predicting "
-        "the current end-effector position, what a policy that learned nothing reaches.",
+        f"{args.windows} random training windows of `{args.dataset}`; the inverse policy samples the "
+        "actions of each window from its demo keypoint trajectory and state. Errors are world-frame "
+        "end-effector target distances (the action's units) over the first "
+        f'{args.executed} actions (what a recovery chunk executes); "hold ee" is the error of '
+        "predicting the current end-effector position, what a policy that learned nothing reaches.",
         "",
-        "| checkpoint | denoising steps | first action error | executed error (mean / median) | hold ee error |"
-        + (" gripper sign mismatch |" if has_grip else ""),
+        "| checkpoint | denoising steps | first action error | executed error (mean / median) | hold ee "
+        "error |" + (" gripper sign mismatch |" if has_grip else ""),
         "|---|---|---|---|---|" + ("---|" if has_grip else ""),
     ]
     for r in rows:

@@ -47,24 +47,40 @@ def build(work: Path, episodes: int):
 
     data = work / "pusht"
     generate_pusht(data, episodes=episodes, region="id", use_videos=False)
-    convert_dataset("local/pusht_ocr", work / "converted", "pusht_t", "feature:observation.object_pose", root=data)
+    convert_dataset(
+        "local/pusht_ocr", work / "converted", "pusht_t", "feature:observation.object_pose", root=data
+    )
     meta = LeRobotDatasetMetadata("local/pusht_ocr", root=data)
     feats = dataset_to_policy_features(meta.features)
     base_cfg = DiffusionConfig(
-        device="cpu", push_to_hub=False, n_obs_steps=2, horizon=16, n_action_steps=8, down_dims=(64, 128, 256),
-        noise_scheduler_type="DDIM", num_inference_steps=10, pretrained_backbone_weights=None, use_group_norm=True,
-        crop_shape=(84, 84), input_features={k: feats[k] for k in ("observation.image", "observation.state")},
+        device="cpu",
+        push_to_hub=False,
+        n_obs_steps=2,
+        horizon=16,
+        n_action_steps=8,
+        down_dims=(64, 128, 256),
+        noise_scheduler_type="DDIM",
+        num_inference_steps=10,
+        pretrained_backbone_weights=None,
+        use_group_norm=True,
+        crop_shape=(84, 84),
+        input_features={k: feats[k] for k in ("observation.image", "observation.state")},
         output_features={"action": feats["action"]},
-    )  # fmt: skip
+    )
     base_pre, base_post = make_pre_post_processors(base_cfg, dataset_stats=meta.stats)
     base = make_policy(base_cfg, ds_meta=meta)
     base_dir = work / "base"
     for obj in (base, base_pre, base_post):
         obj.save_pretrained(base_dir)
     cfg = OcrJointConfig(
-        base_path=str(base_dir), device="cpu", push_to_hub=False, down_dims=(64, 128, 256), num_inference_steps=10,
-        horizon=16, n_recovery_action_steps=8,
-    )  # fmt: skip
+        base_path=str(base_dir),
+        device="cpu",
+        push_to_hub=False,
+        down_dims=(64, 128, 256),
+        num_inference_steps=10,
+        horizon=16,
+        n_recovery_action_steps=8,
+    )
     conv_meta = LeRobotDatasetMetadata("local/pusht_ocr_ocr", root=work / "converted")
     joint = make_policy(cfg, ds_meta=conv_meta)
     pre, post = make_pre_post_processors(cfg, dataset_stats=conv_meta.stats)
@@ -122,7 +138,11 @@ def own_time(joint, pre, post, pose, batch: int, steps: int) -> dict:
         del joint.base.select_action  # back to the class method
         joint._base_pre, joint._base_post = inner[1].fn, inner[2].fn
     base = sum(w.seconds for w in inner)
-    return {"own_ms": 1e3 * (total - base) / steps, "base_ms": 1e3 * base / steps, "overhead": (total - base) / base}
+    return {
+        "own_ms": 1e3 * (total - base) / steps,
+        "base_ms": 1e3 * base / steps,
+        "overhead": (total - base) / base,
+    }
 
 
 def summary(times: list[float]) -> dict:
@@ -131,7 +151,9 @@ def summary(times: list[float]) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=800, help="select_action calls per measurement (x8 = chunks)")
+    parser.add_argument(
+        "--steps", type=int, default=800, help="select_action calls per measurement (x8 = chunks)"
+    )
     parser.add_argument("--episodes", type=int, default=5, help="expert demos to fit the manifold on")
     parser.add_argument("--batch", type=int, default=1)
     parser.add_argument("--repeats", type=int, default=3, help="interleaved repeats; the best mean is kept")
@@ -147,7 +169,9 @@ def main() -> None:
             runs["base_id"].append(summary(time_steps(base, bpre, bpost, id_pose, args.batch, args.steps)))
             runs["joint_id"].append(summary(time_steps(joint, jpre, jpost, id_pose, args.batch, args.steps)))
             runs["base_ood"].append(summary(time_steps(base, bpre, bpost, OOD_POSE, args.batch, args.steps)))
-            runs["joint_ood"].append(summary(time_steps(joint, jpre, jpost, OOD_POSE, args.batch, args.steps)))
+            runs["joint_ood"].append(
+                summary(time_steps(joint, jpre, jpost, OOD_POSE, args.batch, args.steps))
+            )
         assert joint.ocr_stats()["mean_recovery_fraction"] == 1.0  # the OOD run really recovered
         best = {k: min(v, key=lambda s: s["mean_ms"]) for k, v in runs.items()}
         paired = min(
@@ -187,31 +211,37 @@ def main() -> None:
     (HERE / "results").mkdir(exist_ok=True)
     (HERE / "results" / "ocr_joint_overhead.json").write_text(json.dumps(result, indent=2) + "\n")
     i, o = result["id"], result["ood"]
+    id_row = f"{i['base']['mean_ms']:.2f} | {i['joint']['mean_ms']:.2f} | {100 * i['overhead']:+.1f}%"
+    ood_row = f"{o['base']['mean_ms']:.2f} | {o['joint']['mean_ms']:.2f} | —"
+    paired, chunk_ms = i["paired"], result["recovery_chunk_ms"]
     update_section(
         "ocr_joint overhead",
         f"""
-Time per `select_action` step (preprocessor → `select_action` → postprocessor, batch {args.batch}, mean over
-{args.steps} steps = {args.steps // 8} base chunks; best of {args.repeats} interleaved repeats). Base: Push-T image
-diffusion (down_dims 64/128/256, horizon 16, n_obs 2, 8 actions per chunk, 10 DDIM steps); ocr_joint wraps it with a
-keypoint inverse policy of the same size (horizon 16, 10 DDIM steps, 8 recovery actions per chunk). Untrained
-weights: this measures time, not success.
+Time per `select_action` step (preprocessor → `select_action` → postprocessor, batch {args.batch}, mean
+over {args.steps} steps = {args.steps // 8} base chunks; best of {args.repeats} interleaved repeats). Base:
+Push-T image diffusion (down_dims 64/128/256, horizon 16, n_obs 2, 8 actions per chunk, 10 DDIM steps);
+ocr_joint wraps it with a keypoint inverse policy of the same size (horizon 16, 10 DDIM steps, 8 recovery
+actions per chunk). Untrained weights: this measures time, not success.
 
 | observation | base alone (ms/step) | ocr_joint (ms/step) | overhead |
 |---|---|---|---|
-| in distribution (base drives) | {i['base']['mean_ms']:.2f} | {i['joint']['mean_ms']:.2f} | {100 * i['overhead']:+.1f}% |
-| out of distribution (recovery drives) | {o['base']['mean_ms']:.2f} | {o['joint']['mean_ms']:.2f} | — |
+| in distribution (base drives) | {id_row} |
+| out of distribution (recovery drives) | {ood_row} |
 
-Paired (same run: ocr_joint's own time vs the time spent inside its base): {i['paired']['own_ms']:.3f} ms own per step
-on {i['paired']['base_ms']:.2f} ms of base = **{100 * i['paired']['overhead']:.1f}%** overhead. The direct
-comparison above differs by run-to-run noise of the base's chunk inference (± 5% here); the paired figure does not.
+Paired (same run: ocr_joint's own time vs the time spent inside its base): {paired["own_ms"]:.3f} ms own
+per step on {paired["base_ms"]:.2f} ms of base = **{100 * paired["overhead"]:.1f}%** overhead. The direct
+comparison above differs by run-to-run noise of the base's chunk inference (± 5% here); the paired figure
+does not.
 
-Median step (no chunk planned): base {i['base']['median_ms']:.3f} ms, ocr_joint {i['joint']['median_ms']:.3f} ms.
+Median step (no chunk planned): base {i["base"]["median_ms"]:.3f} ms, ocr_joint
+{i["joint"]["median_ms"]:.3f} ms.
 Rows on the base are checked when the base plans its next chunk, as in the paper, so most steps cost what the
 base costs.
 
-One recovery chunk (recovery vector + keypoint plan + inverse-policy sampling of 16 actions): {result['recovery_chunk_ms']:.1f} ms.
+One recovery chunk (recovery vector + keypoint plan + inverse-policy sampling of 16 actions):
+{chunk_ms:.1f} ms.
 
-Target: ≤ 5% overhead in distribution. Machine: {result['machine']}. Date: {result['date']}.
+Target: ≤ 5% overhead in distribution. Machine: {result["machine"]}. Date: {result["date"]}.
 
 Command: `.venv/bin/python benchmarks/ocr_joint_overhead.py`
 

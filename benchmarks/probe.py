@@ -1,7 +1,9 @@
 """A hand-run probe: `lerobot-ocr eval` of one checkpoint with one change, recorded in EXPERIMENTS.md.
 
-    .venv/bin/python benchmarks/probe.py --name delay11 --checkpoint outputs/pusht_ocr_cpu/ocr/checkpoints/last/pretrained_model \
-        --env-type pusht_ocr --region ood --episodes 200 --baseline plain -- --policy.fixed_delay=11
+    CKPT=outputs/pusht_ocr_cpu/ocr/checkpoints/last/pretrained_model
+    .venv/bin/python benchmarks/probe.py --name plain --checkpoint $CKPT --region ood --episodes 200
+    .venv/bin/python benchmarks/probe.py --name delay11 --checkpoint $CKPT --region ood --episodes 200 \
+        --baseline plain -- --policy.fixed_delay=11
 
 Runs the eval with the benchmarks' protocol (seeds 100000+i, batch 10, sync envs on CPU, the task's
 episode cap: `--env.episode_length=400` for Push-T), then adds the run to `benchmarks/results/probes.json`
@@ -23,8 +25,9 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path[:0] = [str(HERE), str(REPO / "src")]
-from ocr_pipeline import BIN, EVAL_SEED, run  # noqa: E402
 from results_md import update_section  # noqa: E402
+
+from lerobot_ocr.pipeline import BIN, EVAL_SEED, run  # noqa: E402
 
 LEDGER = HERE / "results" / "probes.json"
 EXPERIMENTS = HERE / "EXPERIMENTS.md"
@@ -32,7 +35,7 @@ TASK_ARGS = {"pusht_ocr": ["--env.episode_length=400"], "square_ocr": ["--env.vi
 
 
 def verdict(probe: dict, baseline: dict | None) -> str:
-    """"outside" / "inside" the baseline's 95% interval, or "—" without a baseline."""
+    """ "outside" / "inside" the baseline's 95% interval, or "—" without a baseline."""
     if baseline is None:
         return "—"
     lo, hi = baseline["ci95"]
@@ -44,7 +47,8 @@ def render(probes: list[dict]) -> str:
     lines = [
         "Written by `benchmarks/probe.py` from `benchmarks/results/probes.json`; newest last.",
         "",
-        "| date | name | checkpoint | change | region | success | 95% interval | episodes | baseline | vs baseline |",
+        "| date | name | checkpoint | change | region | success | 95% interval | episodes | baseline | "
+        "vs baseline |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for p in probes:
@@ -52,51 +56,86 @@ def render(probes: list[dict]) -> str:
         base_txt = f"{base['name']}: {base['success_rate']:.3g}" if base else "—"
         change = " ".join(f"`{a}`" for a in p["change"]) or "none"
         lines.append(
-            f"| {p['date']} | {p['name']} | `{p['checkpoint']}` | {change} | {p['region']} | {p['success_rate']:.3g} "
-            f"| [{p['ci95'][0]:.2f}, {p['ci95'][1]:.2f}] | {p['n_episodes']} | {base_txt} | {verdict(p, base)} |"
+            f"| {p['date']} | {p['name']} | `{p['checkpoint']}` | {change} | {p['region']} | "
+            f"{p['success_rate']:.3g} | [{p['ci95'][0]:.2f}, {p['ci95'][1]:.2f}] | {p['n_episodes']} | "
+            f"{base_txt} | {verdict(p, base)} |"
         )
-    lines += ["", "Command of each row: `.venv/bin/python benchmarks/probe.py --name <name> --checkpoint <checkpoint> "
-              "--env-type <env> --region <region> --episodes <episodes> -- <change>`."]  # fmt: skip
+    lines += [
+        "",
+        "Command of each row: `.venv/bin/python benchmarks/probe.py --name <name> --checkpoint "
+        "<checkpoint> --env-type <env> --region <region> --episodes <episodes> -- <change>`.",
+    ]
     return "\n".join(lines)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--name", required=True, help="this probe's name (unique; a later probe may use it as --baseline)")
+    parser.add_argument(
+        "--name", required=True, help="this probe's name (unique; a later probe may use it as --baseline)"
+    )
     parser.add_argument("--checkpoint", required=True, help="a pretrained_model folder (ocr_joint or base)")
     parser.add_argument("--env-type", default="pusht_ocr", choices=sorted(TASK_ARGS))
     parser.add_argument("--region", default="ood", choices=["id", "ood"])
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--baseline", default=None, help="name of an earlier probe on the same seeds")
     parser.add_argument("--obs-type", default="environment_state_agent_pos")
-    parser.add_argument("change", nargs="*", help="lerobot-eval arguments after --, e.g. --policy.fixed_delay=11")
+    parser.add_argument(
+        "change", nargs="*", help="lerobot-eval arguments after --, e.g. --policy.fixed_delay=11"
+    )
     args = parser.parse_args()
 
     probes = json.loads(LEDGER.read_text()) if LEDGER.exists() else []
     if any(p["name"] == args.name for p in probes):
         parser.error(f"a probe named {args.name!r} is recorded already; pick another --name")
     if args.baseline and not any(p["name"] == args.baseline for p in probes):
-        parser.error(f"no probe named {args.baseline!r} in {LEDGER} (run the baseline first, without a change)")
+        parser.error(
+            f"no probe named {args.baseline!r} in {LEDGER} (run the baseline first, without a change)"
+        )
     out = REPO / "outputs" / "probes" / args.name
     cmd = [
-        str(BIN / "lerobot-ocr"), "eval", f"--policy.path={args.checkpoint}", f"--env.type={args.env_type}",
-        f"--env.region={args.region}", f"--env.obs_type={args.obs_type}", f"--eval.n_episodes={args.episodes}",
-        "--eval.batch_size=10", "--policy.device=cpu", f"--seed={EVAL_SEED}", "--eval.use_async_envs=false",
-        f"--output_dir={out}", *TASK_ARGS[args.env_type], *args.change,
-    ]  # fmt: skip
+        str(BIN / "lerobot-ocr"),
+        "eval",
+        f"--policy.path={args.checkpoint}",
+        f"--env.type={args.env_type}",
+        f"--env.region={args.region}",
+        f"--env.obs_type={args.obs_type}",
+        f"--eval.n_episodes={args.episodes}",
+        "--eval.batch_size=10",
+        "--policy.device=cpu",
+        f"--seed={EVAL_SEED}",
+        "--eval.use_async_envs=false",
+        f"--output_dir={out}",
+        *TASK_ARGS[args.env_type],
+        *args.change,
+    ]
     run(cmd, out.with_suffix(".log"))
     from lerobot_ocr.eval_report import summarize
 
     ocr = json.loads((out / "ocr_stats.json").read_text()) if (out / "ocr_stats.json").exists() else None
     result = summarize(json.loads((out / "eval_info.json").read_text()), ocr)
-    probes.append({
-        "name": args.name, "date": dt.date.today().isoformat(), "checkpoint": args.checkpoint, "env_type": args.env_type,
-        "region": args.region, "change": args.change, "baseline": args.baseline, "command": " ".join(cmd),
-        "machine": f"{platform.machine()}, python {platform.python_version()}", **result,
-    })  # fmt: skip
+    probes.append(
+        {
+            "name": args.name,
+            "date": dt.date.today().isoformat(),
+            "checkpoint": args.checkpoint,
+            "env_type": args.env_type,
+            "region": args.region,
+            "change": args.change,
+            "baseline": args.baseline,
+            "command": " ".join(cmd),
+            "machine": f"{platform.machine()}, python {platform.python_version()}",
+            **result,
+        }
+    )
     LEDGER.write_text(json.dumps(probes, indent=2) + "\n")
     update_section("Probes", render(probes), path=EXPERIMENTS)
-    print(render(probes[-1:] if not args.baseline else [p for p in probes if p["name"] in (args.baseline, args.name)]))
+    print(
+        render(
+            probes[-1:]
+            if not args.baseline
+            else [p for p in probes if p["name"] in (args.baseline, args.name)]
+        )
+    )
 
 
 if __name__ == "__main__":

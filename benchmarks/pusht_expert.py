@@ -33,7 +33,9 @@ def main() -> None:
 
     parser = argparse.ArgumentParser()
     parser.add_argument("--episodes", type=int, default=100)
-    parser.add_argument("--dataset-episodes", type=int, default=10, help="Episodes for the demos/minute timing.")
+    parser.add_argument(
+        "--dataset-episodes", type=int, default=10, help="Episodes for the demos/minute timing."
+    )
     parser.add_argument("--no-update", action="store_true")
     args = parser.parse_args()
 
@@ -61,7 +63,11 @@ def main() -> None:
         t0 = time.perf_counter()
         generate_pusht(Path(tmp) / "ds", episodes=args.dataset_episodes, region="id", use_videos=True)
         wall = time.perf_counter() - t0
-    results["dataset"] = {"episodes": args.dataset_episodes, "seconds": wall, "demos_per_minute": 60 * args.dataset_episodes / wall}
+    results["dataset"] = {
+        "episodes": args.dataset_episodes,
+        "seconds": wall,
+        "demos_per_minute": 60 * args.dataset_episodes / wall,
+    }
     print(json.dumps(results))
     out = Path(__file__).resolve().parent / "results" / "pusht_expert.json"
     out.parent.mkdir(exist_ok=True)
@@ -77,11 +83,12 @@ def main() -> None:
                 "|---|---|---|---|---|---|",
                 f"| ID (left) | {i['episodes']} | {i['success_rate']:.2f} | {i['mean_length_success']:.0f} | "
                 f"{i['max_length_success']} | {i['seconds_per_episode']:.2f} |",
-                f"| OOD (right) | {o['episodes']} | {o['success_rate']:.2f} | {o['mean_length_success']:.0f} | "
-                f"{o['max_length_success']} | {o['seconds_per_episode']:.2f} |",
+                f"| OOD (right) | {o['episodes']} | {o['success_rate']:.2f} | "
+                f"{o['mean_length_success']:.0f} | {o['max_length_success']} | "
+                f"{o['seconds_per_episode']:.2f} |",
                 "",
-                f"Dataset generation (`lerobot-ocr generate pusht`, {d['episodes']} ID episodes, mp4 video): "
-                f"{d['demos_per_minute']:.1f} demos per minute.",
+                f"Dataset generation (`lerobot-ocr generate pusht`, {d['episodes']} ID episodes, mp4 "
+                f"video): {d['demos_per_minute']:.1f} demos per minute.",
                 "",
                 f"Machine: {results['machine']}. Date: {results['date']}.",
                 "",

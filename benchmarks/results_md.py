@@ -6,7 +6,10 @@ import re
 from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "RESULTS.md"
-HEADER = "# Benchmark results\n\nThe summary (benchmarks/summary.py), then one section per benchmark script; re-run its command to refresh it.\n"
+HEADER = (
+    "# Benchmark results\n\nThe summary (benchmarks/summary.py), then one section per benchmark script; "
+    "re-run its command to refresh it.\n"
+)
 
 
 def update_section(title: str, body: str, path: Path = RESULTS, first: bool = False) -> None:

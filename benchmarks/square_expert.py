@@ -34,11 +34,17 @@ def main() -> None:
     parser.add_argument("--no-update", action="store_true")
     args = parser.parse_args()
 
-    results = {"benchmark": "square_expert", "date": dt.date.today().isoformat(), "machine": f"{platform.machine()}, {os.cpu_count()} cores"}
+    results = {
+        "benchmark": "square_expert",
+        "date": dt.date.today().isoformat(),
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+    }
     for region in ("id", "ood"):
         env = make_square_ocr_env(region=region, render_mode=None)
         t0 = time.perf_counter()
-        runs = [run_square_expert_episode(env, seed=s, expert=SquareExpert(seed=s)) for s in range(args.episodes)]
+        runs = [
+            run_square_expert_episode(env, seed=s, expert=SquareExpert(seed=s)) for s in range(args.episodes)
+        ]
         wall = time.perf_counter() - t0
         env.close()
         ok = [r for r in runs if r["success"]]
@@ -59,13 +65,16 @@ def main() -> None:
         rows = [
             f"| {name} | {r['episodes']} | {r['success_rate']:.2f} | {r['mean_length_success']:.0f} | "
             f"{r['steps_per_second']:.0f} | {r['seconds_per_episode']:.1f} |"
-            for name, r in (("ID (nut right, robosuite default)", results["id"]), ("OOD (nut shifted left)", results["ood"]))
+            for name, r in (
+                ("ID (nut right, robosuite default)", results["id"]),
+                ("OOD (nut shifted left)", results["ood"]),
+            )
         ]
         body = "\n".join(
             [
-                f"Scripted expert on `square_ocr` (robosuite NutAssemblySquare, Panda, absolute eef actions, no cameras), "
-                f"env seeds {results['id']['seeds']}, 400-step cap. Failed seeds: ID {results['id']['failed_seeds']}, "
-                f"OOD {results['ood']['failed_seeds']}.",
+                "Scripted expert on `square_ocr` (robosuite NutAssemblySquare, Panda, absolute eef "
+                f"actions, no cameras), env seeds {results['id']['seeds']}, 400-step cap. Failed seeds: "
+                f"ID {results['id']['failed_seeds']}, OOD {results['ood']['failed_seeds']}.",
                 "",
                 "| starts | episodes | success | mean length (successes) | sim steps / s | s / episode |",
                 "|---|---|---|---|---|---|",

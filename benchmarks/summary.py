@@ -44,12 +44,14 @@ def best_cell(result: dict, cell: str) -> tuple[int, int]:
 
 def fmt(successes: int, n: int) -> str:
     lo, hi = wilson_interval(successes, n)
-    return f"{round(successes / n, 3):g} [{lo:.2f}, {hi:.2f}]"
+    rate = f"{successes / n:.3f}"
+    return f"{rate[:-1] if rate.endswith('0') else rate} [{lo:.2f}, {hi:.2f}]"
 
 
 def table(results_dir: Path = HERE / "results") -> str:
     lines = [
-        "| task | row | base ID | base OOD | joint OOD | joint ID | episodes per cell | paper: base ID / base OOD / joint OOD |",
+        "| task | row | base ID | base OOD | joint OOD | joint ID | episodes per cell | paper: base ID / "
+        "base OOD / joint OOD |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for prefix, (title, paper) in TASKS.items():
@@ -62,7 +64,8 @@ def table(results_dir: Path = HERE / "results") -> str:
             episodes = "/".join(sorted({str(n) for _, n in cells.values()}, key=int))
             row = " | ".join(fmt(*cells[c]) for c in CELLS)
             lines.append(
-                f"| {title} | `{profile}` ({result['date']}) | {row} | {episodes} | {paper[0]:.2f} / {paper[1]:.2f} / {paper[2]:.2f} |"
+                f"| {title} | `{profile}` ({result['date']}) | {row} | {episodes} | {paper[0]:.2f} / "
+                f"{paper[1]:.2f} / {paper[2]:.2f} |"
             )
     return "\n".join(lines)
 
@@ -70,9 +73,10 @@ def table(results_dir: Path = HERE / "results") -> str:
 def body() -> str:
     return (
         "Success rate [95% Wilson interval] per cell; ID / OOD = the object starts inside / outside the "
-        "demonstrations' region; base = the policy alone, joint = `ocr_joint` wrapping it. Every cell caps "
-        "episodes at 400 steps; the paper's joint cells come from a looser budget (the reference's joint eval runs "
-        "60 policy decisions with no step cap). The paper's Push-T base is an image diffusion policy trained on a "
+        "demonstrations' region; base = the policy alone, joint = `ocr_joint` wrapping it. Every cell "
+        "caps episodes at 400 steps; the paper's joint cells come from a looser budget (the reference's "
+        "joint eval runs 60 policy decisions with no step cap). The paper's Push-T base is an image "
+        "diffusion policy trained on a "
         "GPU; ours are low-dim diffusion policies trained on 2 CPU cores.\n\n" + table()
     )
 

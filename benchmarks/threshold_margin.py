@@ -25,7 +25,9 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 from results_md import update_section  # noqa: E402
 
-DEFAULT_CKPT = HERE.parent / "outputs" / "pusht_ocr_quick" / "ocr" / "checkpoints" / "last" / "pretrained_model"
+DEFAULT_CKPT = (
+    HERE.parent / "outputs" / "pusht_ocr_quick" / "ocr" / "checkpoints" / "last" / "pretrained_model"
+)
 MARGINS = (0.0, 1.0, 2.0, 3.0, 4.0)
 
 
@@ -41,20 +43,28 @@ def start_scores(policy, region: str, n: int) -> np.ndarray:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--checkpoint", default=str(DEFAULT_CKPT), help="an ocr_joint pretrained_model folder")
+    parser.add_argument(
+        "--checkpoint", default=str(DEFAULT_CKPT), help="an ocr_joint pretrained_model folder"
+    )
     parser.add_argument("--starts", type=int, default=200, help="starts per region")
     parser.add_argument("--no-update", action="store_true")
     args = parser.parse_args()
     ckpt = Path(args.checkpoint)
     if not ckpt.is_dir():
-        sys.exit(f"No checkpoint at {ckpt}: run `.venv/bin/python benchmarks/pusht_ocr.py --profile quick` first.")
+        sys.exit(
+            f"No checkpoint at {ckpt}: run `.venv/bin/python benchmarks/pusht_ocr.py --profile quick` first."
+        )
     from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
 
     policy = OcrJointPolicy.from_pretrained(ckpt)
     calibrated = float(policy.calibrated_threshold_)
     ids, oods = start_scores(policy, "id", args.starts), start_scores(policy, "ood", args.starts)
     rows = [
-        {"margin": m, "id_flagged": float((ids < calibrated - m).mean()), "ood_flagged": float((oods < calibrated - m).mean())}
+        {
+            "margin": m,
+            "id_flagged": float((ids < calibrated - m).mean()),
+            "ood_flagged": float((oods < calibrated - m).mean()),
+        }
         for m in MARGINS
     ]
     result = {
@@ -77,14 +87,15 @@ def main() -> None:
     update_section(
         "Switch threshold margin",
         f"""
-Manifold of `{result['checkpoint']}` (the Push-T quick profile's; its demo count is in the "Push-T (quick)" section); threshold = 2% quantile of the
-training frames' scores ({calibrated:.2f}, mean log density) minus the margin. {args.starts} fresh starts per
-region (`pusht_ocr` seeds 200000+i). Start frames are the rarest frames of a demo set, so the plain quantile
-flags many unseen ID starts; the default `--policy.threshold_margin` is 2 nats.
+Manifold of `{result["checkpoint"]}` (the Push-T quick profile's; its demo count is in the
+"Push-T (quick)" section); threshold = 2% quantile of the training frames' scores ({calibrated:.2f},
+mean log density) minus the margin. {args.starts} fresh starts per region (`pusht_ocr` seeds 200000+i).
+Start frames are the rarest frames of a demo set, so the plain quantile flags many unseen ID starts; the
+default `--policy.threshold_margin` is 2 nats.
 
 {table}
 
-Machine: {result['machine']}. Date: {result['date']}.
+Machine: {result["machine"]}. Date: {result["date"]}.
 
 Command: `.venv/bin/python benchmarks/threshold_margin.py`
 """,

@@ -1,4 +1,4 @@
-"""Benchmark: low-dim diffusion training step time, plain lerobot-train vs benchmarks/train_in_memory.py.
+"""Benchmark: low-dim diffusion training step time, plain lerobot-train vs lerobot_ocr.train_in_memory.
 
     .venv/bin/python benchmarks/train_step_time.py [--steps 150] [--no-update]
 
@@ -22,13 +22,17 @@ import tempfile
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-import pusht_ocr  # noqa: E402
+REPO = HERE.parent
+sys.path[:0] = [str(HERE), str(REPO / "src")]
 from results_md import update_section  # noqa: E402
+
+from lerobot_ocr.pipeline import BIN, PUSHT, base_train_args  # noqa: E402
 
 
 def timed_run(cmd: list[str]) -> dict:
-    out = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "HF_HUB_OFFLINE": "1"}, cwd=pusht_ocr.REPO)
+    out = subprocess.run(
+        cmd, capture_output=True, text=True, env={**os.environ, "HF_HUB_OFFLINE": "1"}, cwd=REPO
+    )
     if out.returncode != 0:
         raise RuntimeError(out.stderr[-3000:])
     lines = re.findall(r"updt_s:([0-9.]+) data_s:([0-9.]+)", out.stdout + out.stderr)[1:]
@@ -42,36 +46,49 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=150)
     parser.add_argument("--no-update", action="store_true")
     args = parser.parse_args()
-    data = pusht_ocr.REPO / "outputs" / "pusht_ocr_quick" / "base_data"
+    data = REPO / "outputs" / "pusht_ocr_quick" / "base_data"
     if not (data / "meta" / "info.json").exists():
         sys.exit(f"{data} missing: run `.venv/bin/python benchmarks/pusht_ocr.py --profile quick` first.")
-    p = dict(pusht_ocr.PROFILES["quick"], base_steps=args.steps)
-    results = {"benchmark": "train_step_time", "date": dt.date.today().isoformat(), "machine": f"{platform.machine()}, {os.cpu_count()} cores", "steps": args.steps}
+    p = dict(PUSHT.profiles["quick"], base_steps=args.steps)
+    results = {
+        "benchmark": "train_step_time",
+        "date": dt.date.today().isoformat(),
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+        "steps": args.steps,
+    }
     with tempfile.TemporaryDirectory() as tmp:
         for name, out in (("lerobot_train", "a"), ("in_memory", "b")):
-            cmd = pusht_ocr.base_train_args(p, data, Path(tmp) / out)  # starts with: python train_in_memory.py
+            cmd = base_train_args(
+                p, data, Path(tmp) / out, PUSHT, "local/pusht_base"
+            )  # python -m lerobot_ocr.train_in_memory
             cmd = [c if not c.startswith("--log_freq") else "--log_freq=25" for c in cmd]
             if name == "lerobot_train":
-                cmd = [str(pusht_ocr.BIN / "lerobot-train"), *cmd[2:]]
+                cmd = [str(BIN / "lerobot-train"), *cmd[3:]]
             results[name] = timed_run(cmd)
     print(json.dumps(results))
     if not args.no_update:
         rows = [
             f"| {name} | {r['updt_s']:.3f} | {r['data_s']:.3f} | {r['step_s']:.3f} |"
-            for name, r in (("`lerobot-train`", results["lerobot_train"]), ("`benchmarks/train_in_memory.py`", results["in_memory"]))
+            for name, r in (
+                ("`lerobot-train`", results["lerobot_train"]),
+                ("`python -m lerobot_ocr.train_in_memory`", results["in_memory"]),
+            )
         ]
-        body = "\n".join([
-            f"Push-T low-dim base (diffusion [64,128,256], horizon 16, n_obs 2, batch 64, `num_workers=0`) on the quick "
-            f"profile's dataset, {args.steps} steps; lerobot-train's own `updt_s` / `data_s` (mean over its log lines after the first).",
-            "",
-            "| trainer | update (s/step) | data (s/step) | total (s/step) |",
-            "|---|---|---|---|",
-            *rows,
-            "",
-            f"Machine: {results['machine']}. Date: {results['date']}.",
-            "",
-            "Command: `.venv/bin/python benchmarks/train_step_time.py`",
-        ])  # fmt: skip
+        body = "\n".join(
+            [
+                "Push-T low-dim base (diffusion [64,128,256], horizon 16, n_obs 2, batch 64, "
+                f"`num_workers=0`) on the quick profile's dataset, {args.steps} steps; lerobot-train's "
+                "own `updt_s` / `data_s` (mean over its log lines after the first).",
+                "",
+                "| trainer | update (s/step) | data (s/step) | total (s/step) |",
+                "|---|---|---|---|",
+                *rows,
+                "",
+                f"Machine: {results['machine']}. Date: {results['date']}.",
+                "",
+                "Command: `.venv/bin/python benchmarks/train_step_time.py`",
+            ]
+        )
         update_section("Low-dim training step time", body)
 
 

@@ -1,6 +1,6 @@
 """Fit a keypoint manifold on Push-T-like demonstrations and look at its recovery field.
 
-    .venv/bin/python examples/fit_manifold.py [OUTPUT_DIR]
+.venv/bin/python examples/fit_manifold.py [OUTPUT_DIR]
 """
 
 import sys
@@ -22,8 +22,14 @@ manifold = KeypointManifold(n_components=4).fit(keypoints, calibration_quantile=
 for name, pose in {"left (ID)": [150, 250, 0.8], "right (OOD)": [420, 250, 0.8]}.items():
     kps = torch.from_numpy(pose_to_keypoints(np.array(pose), PUSHT_T_KEYPOINTS, rotation="angle")[None])
     out_ = manifold.recovery(kps)
-    print(f"{name:12s} score {out_.score.item():8.2f} (threshold {manifold.threshold_.item():.2f}) "
-          f"OOD={bool(out_.is_ood)} recovery vector {out_.vector[0].numpy().round(3)}")
+    print(
+        f"{name:12s} score {out_.score.item():8.2f} (threshold {manifold.threshold_.item():.2f}) "
+        f"OOD={bool(out_.is_ood)} recovery vector {out_.vector[0].numpy().round(3)}"
+    )
 
-print("picture:", plot_density_field(manifold, PUSHT_T_KEYPOINTS, f"{out}/density_field.png", angle=0.8,
-                                     training_keypoints=keypoints))
+print(
+    "picture:",
+    plot_density_field(
+        manifold, PUSHT_T_KEYPOINTS, f"{out}/density_field.png", angle=0.8, training_keypoints=keypoints
+    ),
+)

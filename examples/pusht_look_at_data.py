@@ -43,7 +43,12 @@ for e in np.unique(ep):
     kps = block_keypoints(pose[ep == e][0])
     ax.scatter(kps[:, 0], kps[:, 1], s=12, c="black", marker="x")
 ax.axvline(256, color="k", lw=0.8, ls="--")
-ax.set(xlim=(0, 512), ylim=(0, 512), aspect="equal", title="Start keypoints: ID (blue), OOD (orange); x = dataset")
+ax.set(
+    xlim=(0, 512),
+    ylim=(0, 512),
+    aspect="equal",
+    title="Start keypoints: ID (blue), OOD (orange); x = dataset",
+)
 fig.tight_layout()
 fig.savefig(out / "start_regions.png")
 

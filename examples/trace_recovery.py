@@ -28,12 +28,20 @@ def main(args: list[str]) -> None:
         d = keypoints.shape[-1]
         still = (plan[0] - plan[0, :1]).norm(dim=-1).mean(-1) <= 1e-9
         row = {
-            "object": frames[0, :d, d], "ee": state[0, :d], "dist": self._distance(state, keypoints)[0],
-            "still_frames": int(still.sum()), "score": self.manifold.score(keypoints[:1].double())[0],
-            "plan_shift": (plan[0, -1] - plan[0, 0]).mean(0), "target_first": actions[0, 0, :d],
-            "target_last": actions[0, -1, :d], "last_dim": actions[0, :, -1],
-        }  # fmt: skip
-        print(json.dumps({k: np.round(np.asarray(v, dtype=float), 3).tolist() for k, v in row.items()}), flush=True)
+            "object": frames[0, :d, d],
+            "ee": state[0, :d],
+            "dist": self._distance(state, keypoints)[0],
+            "still_frames": int(still.sum()),
+            "score": self.manifold.score(keypoints[:1].double())[0],
+            "plan_shift": (plan[0, -1] - plan[0, 0]).mean(0),
+            "target_first": actions[0, 0, :d],
+            "target_last": actions[0, -1, :d],
+            "last_dim": actions[0, :, -1],
+        }
+        print(
+            json.dumps({k: np.round(np.asarray(v, dtype=float), 3).tolist() for k, v in row.items()}),
+            flush=True,
+        )
         return actions, plan
 
     OcrJointPolicy.recovery_actions = traced

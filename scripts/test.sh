@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Run the test suite in the project environment (sets it up first if needed).
+# Lint (ruff, settings in pyproject.toml) and run the test suite in the project environment (set up first if needed).
 # Extra arguments go to pytest, e.g. `bash scripts/test.sh -m "not slow"` to skip integration tests.
 set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -9,4 +9,5 @@ cd "$ROOT"
 # editable install points at whichever clone ran setup last.
 export PYTHONPATH="$ROOT/src${PYTHONPATH:+:$PYTHONPATH}"
 export MUJOCO_GL=${MUJOCO_GL:-egl} SDL_VIDEODRIVER=${SDL_VIDEODRIVER:-dummy} HF_HUB_OFFLINE=${HF_HUB_OFFLINE:-1}
+.venv/bin/ruff check --quiet . || { echo "ruff check failed: fix the lines above (.venv/bin/ruff check --fix . fixes some)" >&2; exit 1; }
 exec .venv/bin/python -m pytest "$@"

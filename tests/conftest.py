@@ -17,10 +17,23 @@ TINY_OCR = {
     "horizon": 16,
     "n_components": 2,
 }
+# A tiny LeRobot diffusion base (n_obs_steps 2, chunks of 4 actions): fast to build and to run.
+TINY_DIFFUSION = {
+    "device": "cpu",
+    "push_to_hub": False,
+    "n_obs_steps": 2,
+    "horizon": 8,
+    "n_action_steps": 4,
+    "down_dims": (32, 64),
+    "diffusion_step_embed_dim": 32,
+    "num_inference_steps": 2,
+}
 
 
-def save_base_checkpoint(policy_cfg, ds_meta, out: Path, inputs=("observation.image", "observation.state")) -> Path:
-    """Save an untrained policy + its processors as a `pretrained_model` folder (what lerobot-train writes)."""
+def save_base_checkpoint(
+    policy_cfg, ds_meta, out: Path, inputs=("observation.image", "observation.state")
+) -> Path:
+    """Save an untrained policy + its processors as a `pretrained_model` folder (as lerobot-train does)."""
     from lerobot.policies.factory import get_policy_class, make_pre_post_processors
     from lerobot.utils.feature_utils import dataset_to_policy_features
 
@@ -61,10 +74,11 @@ def diffusion_base(pusht_dataset) -> Path:
     from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
 
     cfg = DiffusionConfig(
-        device="cpu", push_to_hub=False, n_obs_steps=2, horizon=8, n_action_steps=4, down_dims=(32, 64),
-        diffusion_step_embed_dim=32, spatial_softmax_num_keypoints=8, num_inference_steps=2,
-        pretrained_backbone_weights=None, use_group_norm=True, crop_shape=None,
-    )  # fmt: skip
+        **TINY_DIFFUSION,
+        spatial_softmax_num_keypoints=8,
+        pretrained_backbone_weights=None,
+        use_group_norm=True,
+        crop_shape=None,
+    )
     meta = LeRobotDatasetMetadata("local/pusht_ocr", root=pusht_dataset)
     return save_base_checkpoint(cfg, meta, pusht_dataset.with_name("base_diffusion"))
-

@@ -35,9 +35,14 @@ def test_keypoint_source_recovers_the_pose(pusht_dataset, tmp_path):
     """The hub's `pusht_keypoints` layout (8 corners in environment_state) -> pose by rigid fit."""
     out = tmp_path / "conv"
     convert_dataset(
-        "local/pusht_ocr", out, "pusht_t", "keypoints:observation.environment_state", root=pusht_dataset,
-        source_keypoints="pusht_corners", output_repo_id="local/from_kps",
-    )  # fmt: skip
+        "local/pusht_ocr",
+        out,
+        "pusht_t",
+        "keypoints:observation.environment_state",
+        root=pusht_dataset,
+        source_keypoints="pusht_corners",
+        output_repo_id="local/from_kps",
+    )
     truth = columns(pusht_dataset, "observation.object_pose")["observation.object_pose"]
     got = columns(out, "observation.object_keypoints")["observation.object_keypoints"].reshape(-1, 9, 2)
     np.testing.assert_allclose(got, np.stack([block_keypoints(p) for p in truth]), atol=1e-2)
@@ -64,7 +69,9 @@ def test_estimator_source_resumes_after_interruption(pusht_dataset, tmp_path, mo
     convert_dataset("local/pusht_ocr", out, "pusht_t", estimator, root=pusht_dataset)
     assert calls[0] == 150 and len(calls) == n_frames - 150  # cached frames are not estimated again
     truth = columns(pusht_dataset, "observation.object_pose")["observation.object_pose"]
-    np.testing.assert_allclose(columns(out, "observation.object_pose")["observation.object_pose"], truth, atol=1e-5)
+    np.testing.assert_allclose(
+        columns(out, "observation.object_pose")["observation.object_pose"], truth, atol=1e-5
+    )
 
 
 def test_errors_are_clear(pusht_dataset, tmp_path):
@@ -72,7 +79,9 @@ def test_errors_are_clear(pusht_dataset, tmp_path):
     with pytest.raises(KeyError, match="no feature 'observation.block'"):
         convert_dataset("local/pusht_ocr", tmp_path / "a", "pusht_t", "feature:observation.block", **kw)
     with pytest.raises(ValueError, match="Keypoint spec mismatch"):
-        convert_dataset("local/pusht_ocr", tmp_path / "b", "pusht_t", "keypoints:observation.environment_state", **kw)
+        convert_dataset(
+            "local/pusht_ocr", tmp_path / "b", "pusht_t", "keypoints:observation.environment_state", **kw
+        )
     with pytest.raises(ValueError, match="3 numbers per frame but a 'quat_wxyz' pose has 7"):
         convert_dataset(
             "local/pusht_ocr", tmp_path / "c", "axes:0.05", "feature:observation.object_pose", **kw
@@ -82,7 +91,11 @@ def test_errors_are_clear(pusht_dataset, tmp_path):
 
     def flaky(frame):  # NaN on frame 3 until the "bug" is fixed
         calls.append(int(frame["index"]))
-        return np.full(3, np.nan) if int(frame["index"]) == 3 and not fixed else frame["observation.object_pose"].numpy()
+        return (
+            np.full(3, np.nan)
+            if int(frame["index"]) == 3 and not fixed
+            else frame["observation.object_pose"].numpy()
+        )
 
     with pytest.raises(ValueError, match="NaN/inf poses for 1 of .* frames \\(first: episode 0, frame 3\\)"):
         convert_dataset("local/pusht_ocr", tmp_path / "d", "pusht_t", flaky, **kw)
@@ -100,13 +113,27 @@ def test_cli_convert_and_push(pusht_dataset, tmp_path, monkeypatch):
 
     pushed = []
     monkeypatch.setattr(
-        "lerobot.datasets.lerobot_dataset.LeRobotDataset.push_to_hub", lambda self, **kw: pushed.append((self.repo_id, kw))
+        "lerobot.datasets.lerobot_dataset.LeRobotDataset.push_to_hub",
+        lambda self, **kw: pushed.append((self.repo_id, kw)),
     )
     out = tmp_path / "cli"
-    rc = main([
-        "convert", "--repo-id", "local/pusht_ocr", "--root", str(pusht_dataset), "--object", "pusht_t",
-        "--pose-from", "feature:observation.object_pose", "--output-root", str(out),
-        "--output-repo-id", "me/pusht_ocr_kp", "--push-to-hub",
-    ])  # fmt: skip
+    rc = main(
+        [
+            "convert",
+            "--repo-id",
+            "local/pusht_ocr",
+            "--root",
+            str(pusht_dataset),
+            "--object",
+            "pusht_t",
+            "--pose-from",
+            "feature:observation.object_pose",
+            "--output-root",
+            str(out),
+            "--output-repo-id",
+            "me/pusht_ocr_kp",
+            "--push-to-hub",
+        ]
+    )
     assert rc == 0 and (out / "meta" / "info.json").exists()
     assert pushed == [("me/pusht_ocr_kp", {"private": False})]

@@ -21,9 +21,9 @@ def test_read_columns_errors(tmp_path):
     import pandas as pd
 
     (tmp_path / "data" / "chunk-000").mkdir(parents=True)
-    pd.DataFrame({"index": [0, 1], "episode_index": [0, 0], "frame_index": [0, 1], "action": [[1.0, 2.0], [3.0, 4.0]]}).to_parquet(
-        tmp_path / "data" / "chunk-000" / "file-000.parquet"
-    )
+    pd.DataFrame(
+        {"index": [0, 1], "episode_index": [0, 0], "frame_index": [0, 1], "action": [[1.0, 2.0], [3.0, 4.0]]}
+    ).to_parquet(tmp_path / "data" / "chunk-000" / "file-000.parquet")
     cols = read_columns(tmp_path, ["action"])
     assert cols["action"].shape == (2, 2)
     with pytest.raises(KeyError, match="lerobot-ocr convert"):

@@ -5,7 +5,7 @@ from lerobot_ocr.manifold import KeypointManifold
 
 
 def test_demo_command_writes_picture_manifold_and_summary(tmp_path, capsys):
-    assert main(["demo", "--output-dir", str(tmp_path), "--episodes", "12"]) == 0
+    assert main(["demo", "manifold", "--output-dir", str(tmp_path), "--episodes", "12"]) == 0
     summary = json.loads((tmp_path / "summary.json").read_text())
     png = (tmp_path / "density_field.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000

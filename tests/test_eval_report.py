@@ -4,7 +4,8 @@ from lerobot_ocr.eval_report import format_start_split, format_table, summarize,
 
 
 @pytest.mark.parametrize(
-    "k,n,lo,hi", [(0, 10, 0.0, 0.2775), (10, 10, 0.7225, 1.0), (5, 10, 0.2366, 0.7634), (47, 50, 0.8378, 0.9794)]
+    "k,n,lo,hi",
+    [(0, 10, 0.0, 0.2775), (10, 10, 0.7225, 1.0), (5, 10, 0.2366, 0.7634), (47, 50, 0.8378, 0.9794)],
 )
 def test_wilson_interval(k, n, lo, hi):
     got = wilson_interval(k, n)
@@ -29,13 +30,15 @@ def test_successes_split_by_where_episodes_started():
         "overall": {"avg_max_reward": 0.6, "eval_s": 1.0},
     }
     # one surplus row from a last partial batch, which lerobot-eval drops: it must not count
-    row = summarize(info, {"mean_recovery_fraction": 0.4, "started_ood": [True, True, False, True, False, True]})
+    row = summarize(
+        info, {"mean_recovery_fraction": 0.4, "started_ood": [True, True, False, True, False, True]}
+    )
     assert row["started_ood"] == {"episodes": 3, "successes": 2}
     assert row["started_id"] == {"episodes": 2, "successes": 1}
     line = format_start_split({"joint_ood": row, "base_ood": summarize(info, None)})
     assert line == (
-        "joint_ood: 3 started out of distribution (recovery first): 2 succeeded (0.67); "
-        "2 started on the base: 1 succeeded (0.50)"
+        "joint_ood: 3 started out of distribution (recovery first): 2 succeeded (0.67); 2 started on the "
+        "base: 1 succeeded (0.50)"
     )
     assert "started_ood" not in summarize(info, {"mean_recovery_fraction": 0.4, "started_ood": [True]})
 
@@ -45,7 +48,12 @@ def test_how_recovery_first_episodes_ended():
 
     # (T=4 steps, B=4 rows): row 0 handed back at step 2; row 1 never; row 2 at step 1, then recovering
     # again; row 3 on the base from step 0
-    modes = [[True, True, True, False], [True, True, False, False], [False, True, True, False], [False, True, True, False]]
+    modes = [
+        [True, True, True, False],
+        [True, True, False, False],
+        [False, True, True, False],
+        [False, True, True, False],
+    ]
     rows = episode_modes(modes)
     assert rows["first_base_step"] == [2, -1, 1, 0]
     assert rows["ended_in_recovery"] == [False, True, True, False]
@@ -54,11 +62,17 @@ def test_how_recovery_first_episodes_ended():
         "overall": {"avg_max_reward": 0.6, "eval_s": 1.0},
     }
     ocr = {
-        "mean_recovery_fraction": 0.5, "started_ood": modes[0],
-        "first_base_step": rows["first_base_step"], "ended_in_recovery": rows["ended_in_recovery"],
-    }  # fmt: skip
+        "mean_recovery_fraction": 0.5,
+        "started_ood": modes[0],
+        "first_base_step": rows["first_base_step"],
+        "ended_in_recovery": rows["ended_in_recovery"],
+    }
     flagged = summarize(info, ocr)["started_ood"]
-    assert (flagged["failed_never_handed_back"], flagged["failed_in_recovery"], flagged["failed_on_base"]) == (1, 1, 1)
+    assert (
+        flagged["failed_never_handed_back"],
+        flagged["failed_in_recovery"],
+        flagged["failed_on_base"],
+    ) == (1, 1, 1)
     assert flagged["mean_first_base_step"] == 1.5  # rows 0 and 2; row 1 never handed back
     assert format_start_split({"joint_ood": summarize(info, ocr)}).endswith(
         "Recovery-first failures: 1 never handed back, 1 ended in a later recovery, 1 ended on the base; "
@@ -77,6 +91,8 @@ def test_episode_stats_stop_at_each_episode_end():
     modes = [[True, True, False], [True, False, False], [False, True, True], [False, True, True]]
     whole, cut = episode_modes(modes), episode_modes(modes, steps)
     assert whole["recovery_fraction"][0] == 0.5 and cut["recovery_fraction"][0] == 1.0
-    assert whole["first_base_step"][0] == 2 and cut["first_base_step"][0] == -1  # never handed back in its episode
+    assert (
+        whole["first_base_step"][0] == 2 and cut["first_base_step"][0] == -1
+    )  # never handed back in its episode
     assert whole["ended_in_recovery"][0] is False and cut["ended_in_recovery"][0] is True
     assert cut["recovery_fraction"][1:] == whole["recovery_fraction"][1:] == [0.75, 0.5]  # rows that ran to T

@@ -14,7 +14,9 @@ def random_rotations(n, seed=0):
 
 def test_quaternion_matrix_round_trip_and_convention():
     rot = random_rotations(200)
-    torch.testing.assert_close(rot @ rot.transpose(-1, -2), torch.eye(3, dtype=torch.float64).expand(200, 3, 3))
+    torch.testing.assert_close(
+        rot @ rot.transpose(-1, -2), torch.eye(3, dtype=torch.float64).expand(200, 3, 3)
+    )
     torch.testing.assert_close(torch.linalg.det(rot), torch.ones(200, dtype=torch.float64))
     q = g.matrix_to_quaternion(rot)
     assert (q[:, 0] >= 0).all()
@@ -40,7 +42,9 @@ def test_axis_angle_round_trip_including_zero():
     v[0] = 0.0
     v[1] = 1e-10
     torch.testing.assert_close(g.matrix_to_axis_angle(g.axis_angle_to_matrix(v)), v)
-    torch.testing.assert_close(g.axis_angle_to_matrix(torch.zeros(3, dtype=torch.float64)), torch.eye(3, dtype=torch.float64))
+    torch.testing.assert_close(
+        g.axis_angle_to_matrix(torch.zeros(3, dtype=torch.float64)), torch.eye(3, dtype=torch.float64)
+    )
 
 
 def test_rotation_6d_round_trip_and_gram_schmidt():
@@ -66,7 +70,11 @@ def test_numpy_and_torch_agree():
 def test_pose_vector_round_trip(rotation):
     rng = np.random.default_rng(0)
     d = g.pose_dim(rotation)
-    rot = g.quaternion_to_matrix(rng.normal(size=(20, 4))) if d == 3 else g.angle_to_matrix(rng.uniform(-3, 3, 20))
+    rot = (
+        g.quaternion_to_matrix(rng.normal(size=(20, 4)))
+        if d == 3
+        else g.angle_to_matrix(rng.uniform(-3, 3, 20))
+    )
     T = g.make_transform(rot, rng.normal(size=(20, d)))
     vec = g.matrix_to_pose(T, rotation)
     assert vec.shape == (20, g.pose_size(rotation))
@@ -76,19 +84,27 @@ def test_pose_vector_round_trip(rotation):
 @pytest.mark.parametrize("d", [2, 3])
 def test_compose_invert_apply(d):
     rng = np.random.default_rng(d)
-    rot = g.quaternion_to_matrix(rng.normal(size=(10, 4))) if d == 3 else g.angle_to_matrix(rng.uniform(-3, 3, 10))
+    rot = (
+        g.quaternion_to_matrix(rng.normal(size=(10, 4)))
+        if d == 3
+        else g.angle_to_matrix(rng.uniform(-3, 3, 10))
+    )
     a = g.make_transform(rot, rng.normal(size=(10, d)))
     b = g.make_transform(rot[::-1].copy(), rng.normal(size=(10, d)))
     pts = rng.normal(size=(10, 7, d))
     np.testing.assert_allclose(g.compose(a, g.invert(a)), np.broadcast_to(np.eye(d + 1), a.shape), atol=1e-12)
     np.testing.assert_allclose(
-        g.transform_points(g.compose(a, b), pts), g.transform_points(a, g.transform_points(b, pts)), atol=1e-12
+        g.transform_points(g.compose(a, b), pts),
+        g.transform_points(a, g.transform_points(b, pts)),
+        atol=1e-12,
     )
     np.testing.assert_allclose(g.transform_points(g.invert(a), g.transform_points(a, pts)), pts, atol=1e-12)
     np.testing.assert_allclose(g.relative(a, b), g.invert(a) @ b, atol=1e-12)
     # vectors ignore translation
     np.testing.assert_allclose(
-        g.transform_vectors(a, pts), g.transform_points(a, pts) - g.translation_part(a)[:, None, :], atol=1e-12
+        g.transform_vectors(a, pts),
+        g.transform_points(a, pts) - g.translation_part(a)[:, None, :],
+        atol=1e-12,
     )
 
 
@@ -96,20 +112,32 @@ def test_se2_helpers_match_matrices():
     a = np.array([10.0, -3.0, 2.5])
     b = np.array([1.0, 4.0, 1.5])
     ab = g.se2_compose(a, b)
-    np.testing.assert_allclose(g.pose_to_matrix(ab, "angle"), g.pose_to_matrix(a, "angle") @ g.pose_to_matrix(b, "angle"), atol=1e-12)
+    np.testing.assert_allclose(
+        g.pose_to_matrix(ab, "angle"), g.pose_to_matrix(a, "angle") @ g.pose_to_matrix(b, "angle"), atol=1e-12
+    )
     assert -math.pi <= ab[2] < math.pi
     np.testing.assert_allclose(g.se2_compose(a, g.se2_inverse(a)), [0, 0, 0], atol=1e-12)
-    np.testing.assert_allclose(g.se2_transform_points(np.array([5.0, 0.0, math.pi / 2]), np.array([[1.0, 0.0]])), [[5.0, 1.0]], atol=1e-12)
+    np.testing.assert_allclose(
+        g.se2_transform_points(np.array([5.0, 0.0, math.pi / 2]), np.array([[1.0, 0.0]])),
+        [[5.0, 1.0]],
+        atol=1e-12,
+    )
 
 
 @pytest.mark.parametrize("d", [2, 3])
 def test_rigid_fit_recovers_pose_with_noise(d):
     rng = np.random.default_rng(10 + d)
-    rot = g.quaternion_to_matrix(rng.normal(size=(30, 4))) if d == 3 else g.angle_to_matrix(rng.uniform(-3, 3, 30))
+    rot = (
+        g.quaternion_to_matrix(rng.normal(size=(30, 4)))
+        if d == 3
+        else g.angle_to_matrix(rng.uniform(-3, 3, 30))
+    )
     T = g.make_transform(rot, rng.uniform(-100, 100, size=(30, d)))
     local = rng.normal(scale=20, size=(9, d))
     world = g.transform_points(T, local)
-    np.testing.assert_allclose(g.fit_rigid_transform(np.broadcast_to(local, world.shape), world), T, atol=1e-9)
+    np.testing.assert_allclose(
+        g.fit_rigid_transform(np.broadcast_to(local, world.shape), world), T, atol=1e-9
+    )
     noisy = world + rng.normal(scale=0.5, size=world.shape)
     fit = g.fit_rigid_transform(np.broadcast_to(local, world.shape), noisy)
     assert np.abs(g.translation_part(fit) - g.translation_part(T)).max() < 1.5

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import pytest
 import torch
+
 from test_ocr_joint import make_joint
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
@@ -13,7 +14,9 @@ from inverse_policy_error import window_errors  # noqa: E402
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
 
 
-def test_window_errors_are_zero_for_the_demo_actions_and_not_for_noise(diffusion_base, converted_dataset, monkeypatch):
+def test_window_errors_are_zero_for_the_demo_actions_and_not_for_noise(
+    diffusion_base, converted_dataset, monkeypatch
+):
     joint = make_joint(diffusion_base, converted_dataset)
     windows = joint._windows(torch.arange(0, 200, 10))
     monkeypatch.setattr(joint.inverse, "sample", lambda kp, st, fr, noise=None: windows["actions"].clone())

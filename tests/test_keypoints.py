@@ -22,7 +22,9 @@ def test_pusht_corners_match_gym_pusht_environment_state():
             world = pose_to_keypoints(np.asarray(info["block_pose"]), PUSHT_T_CORNERS, rotation="angle")
             np.testing.assert_allclose(world, obs["environment_state"].reshape(8, 2), atol=1e-6)
             # ...and the reverse: environment_state -> block pose by rigid fit (the pusht_keypoints layout)
-            pose = g.matrix_to_pose(keypoints_to_pose(obs["environment_state"].reshape(8, 2), PUSHT_T_CORNERS), "angle")
+            pose = g.matrix_to_pose(
+                keypoints_to_pose(obs["environment_state"].reshape(8, 2), PUSHT_T_CORNERS), "angle"
+            )
             np.testing.assert_allclose(pose[:2], info["block_pose"][:2], atol=1e-6)
             assert abs(g.wrap_angle(np.array(pose[2] - info["block_pose"][2]))) < 1e-6
     finally:
@@ -61,7 +63,11 @@ def test_resolve_specs(tmp_path):
 def test_pose_keypoints_round_trip_with_noise(local):
     rng = np.random.default_rng(0)
     d = local.shape[1]
-    rot = g.quaternion_to_matrix(rng.normal(size=(50, 4))) if d == 3 else g.angle_to_matrix(rng.uniform(-3, 3, 50))
+    rot = (
+        g.quaternion_to_matrix(rng.normal(size=(50, 4)))
+        if d == 3
+        else g.angle_to_matrix(rng.uniform(-3, 3, 50))
+    )
     scale = np.abs(local).max()
     T = g.make_transform(rot, rng.uniform(-5, 5, size=(50, d)) * scale)
     world = pose_to_keypoints(T, local)

@@ -26,7 +26,9 @@ def test_density_equals_sklearn_score_samples(data, covariance_type):
     query = data[:50] + np.random.default_rng(1).normal(scale=20, size=(50, 5, 2))
     ours = m.density(torch.from_numpy(query)).numpy()
     for k in range(5):
-        gmm = GaussianMixture(3, covariance_type=covariance_type, random_state=0, max_iter=200).fit(data[:, k])
+        gmm = GaussianMixture(3, covariance_type=covariance_type, random_state=0, max_iter=200).fit(
+            data[:, k]
+        )
         np.testing.assert_allclose(ours[:, k], np.exp(gmm.score_samples(query[:, k])), rtol=1e-6, atol=0)
 
 
@@ -54,7 +56,12 @@ def test_gradient_matches_autograd(manifold, data):
 
 def test_stable_far_from_data(manifold, data):
     std = data.reshape(-1, 2).std(0)
-    far = torch.from_numpy(data[:8] + 1000 * std * np.array([[1, 0], [0, 1], [-1, 0], [0, -1], [1, 1], [-1, 1], [1, -1], [-1, -1]])[:, None, :])
+    far = torch.from_numpy(
+        data[:8]
+        + 1000
+        * std
+        * np.array([[1, 0], [0, 1], [-1, 0], [0, -1], [1, 1], [-1, 1], [1, -1], [-1, -1]])[:, None, :]
+    )
     assert (manifold.density(far) == 0).all()  # the raw density underflows...
     for magnitude in ("log_deficit", "paper"):
         out = manifold.recovery(far, magnitude=magnitude)
@@ -123,7 +130,11 @@ def test_score_types(data, score_type):
     m = KeypointManifold(n_components=2, score_type=score_type).fit(data)
     x = torch.from_numpy(data[:7])
     lp = m.log_density(x)
-    expected = {"mean_log_density": lp.mean(-1), "min_log_density": lp.amin(-1), "mean_density": lp.exp().mean(-1)}
+    expected = {
+        "mean_log_density": lp.mean(-1),
+        "min_log_density": lp.amin(-1),
+        "mean_density": lp.exp().mean(-1),
+    }
     torch.testing.assert_close(m.score(x), expected[score_type])
 
 
@@ -175,7 +186,9 @@ def test_bad_input_raises_clear_errors(manifold, data, tmp_path):
     with pytest.raises(ValueError, match="non-finite"):
         KeypointManifold().fit(nan_data)
     with pytest.raises(NotFittedError, match="threshold"):
-        KeypointManifold(n_components=2).fit(data, calibration_quantile=None).is_ood(torch.from_numpy(data[:1]))
+        KeypointManifold(n_components=2).fit(data, calibration_quantile=None).is_ood(
+            torch.from_numpy(data[:1])
+        )
     with pytest.raises(ValueError, match="score_type"):
         KeypointManifold(score_type="max")
     with pytest.raises(ValueError, match="magnitude"):

@@ -9,7 +9,9 @@ torch.manual_seed(0)
 
 
 def random_se2(n):
-    return pose_to_matrix(torch.cat([torch.rand(n, 2) * 500, (torch.rand(n, 1) - 0.5) * 2 * np.pi], -1).double(), "angle")
+    return pose_to_matrix(
+        torch.cat([torch.rand(n, 2) * 500, (torch.rand(n, 1) - 0.5) * 2 * np.pi], -1).double(), "angle"
+    )
 
 
 def random_se3(n):
@@ -17,7 +19,9 @@ def random_se3(n):
     return pose_to_matrix(torch.cat([torch.randn(n, 3), quat], -1).double(), "quat_wxyz")
 
 
-@pytest.mark.parametrize("spec,n", [("point", 2), ("point", 5), ("pose:angle", 3), ("pose:angle", 4), ("none", 2)])
+@pytest.mark.parametrize(
+    "spec,n", [("point", 2), ("point", 5), ("pose:angle", 3), ("pose:angle", 4), ("none", 2)]
+)
 def test_round_trip_2d(spec, n):
     frame = random_se2(7)
     x = torch.rand(7, n).double() * 100
@@ -44,7 +48,9 @@ def test_round_trip_3d_poses_with_gripper(rotation):
     y = to_object_frame(x, frame, f"pose:{rotation}")
     assert y.shape[-1] == 3 + 6 + 1  # position, rot6d, gripper
     back = from_object_frame(y, frame, f"pose:{rotation}")
-    torch.testing.assert_close(pose_to_matrix(back[:, :-1], rotation), world)  # same pose (quaternion sign free)
+    torch.testing.assert_close(
+        pose_to_matrix(back[:, :-1], rotation), world
+    )  # same pose (quaternion sign free)
     torch.testing.assert_close(back[:, -1], x[:, -1])
 
 

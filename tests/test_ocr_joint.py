@@ -1,8 +1,9 @@
-"""The ocr_joint policy on tiny data: switch per row, base history, bad input, save/load, a second base type."""
+"""ocr_joint on tiny data: switch per row, base history, bad input, save/load, a second base type."""
 
 import numpy as np
 import pytest
 import torch
+
 from conftest import TINY_OCR, save_base_checkpoint
 
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
@@ -74,7 +75,9 @@ def test_training_loss_uses_object_frame_windows(joint):
 def test_switch_is_decided_per_row(joint, id_pose, monkeypatch):
     joint.reset()
     marker = torch.full((1, TINY_OCR["horizon"], 2), 123.0)
-    monkeypatch.setattr(joint.inverse, "sample", lambda plan, state, frames, noise=None: marker.expand(len(plan), -1, -1))
+    monkeypatch.setattr(
+        joint.inverse, "sample", lambda plan, state, frames, noise=None: marker.expand(len(plan), -1, -1)
+    )
     batch = observation([id_pose, OOD_POSE, id_pose])
     torch.manual_seed(0)
     action = joint.select_action(dict(batch))
@@ -107,7 +110,9 @@ def test_base_history_stays_right_through_a_recovery(diffusion_base, converted_d
     joint.select_action(observation([id_pose], [states[n + 3]]))  # back in distribution: hand back
     assert joint.ocr_stats()["in_recovery"][-1].tolist() == [False] and joint.ocr_stats()["handbacks"] == 1
     queue = list(joint.base._queues["observation.state"])
-    torch.testing.assert_close(torch.stack(queue), torch.stack([normalized(states[n + 2]), normalized(states[n + 3])]))
+    torch.testing.assert_close(
+        torch.stack(queue), torch.stack([normalized(states[n + 2]), normalized(states[n + 3])])
+    )
     assert len(joint.base._queues["action"]) == n - 1  # a fresh chunk
 
 
@@ -157,7 +162,9 @@ def test_bad_input_gives_clear_errors(joint, diffusion_base, converted_dataset, 
         make_joint(tmp_path / "empty", converted_dataset)
     with pytest.raises(ValueError, match="Keypoint spec mismatch"):
         make_joint(diffusion_base, converted_dataset, object_keypoints="axes:0.05")
-    with pytest.raises(ValueError, match="no object pose feature 'observation.block_pose'.*lerobot-ocr convert"):
+    with pytest.raises(
+        ValueError, match="no object pose feature 'observation.block_pose'.*lerobot-ocr convert"
+    ):
         make_joint(diffusion_base, converted_dataset, object_pose_key="observation.block_pose")
 
 
@@ -171,7 +178,9 @@ def test_save_load_round_trip_gives_identical_actions(joint, id_pose, tmp_path, 
     assert any(k.startswith("manifold.") for k in keys) and not any(k.startswith("base.") for k in keys)
     for name in ("config.json", "model.safetensors", "policy_preprocessor.json", "policy_postprocessor.json"):
         assert (tmp_path / "ckpt" / "base" / name).is_file()
-    monkeypatch.setattr(joint.config, "base_path", str(tmp_path / "moved_away"))  # the bundle is self-contained
+    monkeypatch.setattr(
+        joint.config, "base_path", str(tmp_path / "moved_away")
+    )  # the bundle is self-contained
     joint.save_pretrained(tmp_path / "ckpt2")
     loaded = get_policy_class("ocr_joint").from_pretrained(tmp_path / "ckpt2")
     batch = observation([id_pose, OOD_POSE])
@@ -187,7 +196,10 @@ def test_save_load_round_trip_gives_identical_actions(joint, id_pose, tmp_path, 
     reloaded = get_policy_class("ocr_joint").from_pretrained(tmp_path / "ckpt2", config=cfg)
     assert reloaded.manifold.threshold_ == pytest.approx(joint.calibrated_threshold_ - 0.5)
     cfg.threshold = -1e9
-    assert get_policy_class("ocr_joint").from_pretrained(tmp_path / "ckpt2", config=cfg).manifold.threshold_ == -1e9
+    assert (
+        get_policy_class("ocr_joint").from_pretrained(tmp_path / "ckpt2", config=cfg).manifold.threshold_
+        == -1e9
+    )
 
 
 def test_push_to_hub_and_load_by_hub_id(joint, tmp_path, monkeypatch):
@@ -212,8 +224,13 @@ def test_push_to_hub_and_load_by_hub_id(joint, tmp_path, monkeypatch):
 
     monkeypatch.setattr(hub, "HfApi", FakeApi)
     joint.push_to_hub("me/ocr_joint_pusht")
-    assert "base/model.safetensors" in uploaded["me/ocr_joint_pusht"] and "model.safetensors" in uploaded["me/ocr_joint_pusht"]
-    monkeypatch.setattr("huggingface_hub.snapshot_download", lambda repo_id, **kw: str(tmp_path / "hub" / repo_id))
+    assert (
+        "base/model.safetensors" in uploaded["me/ocr_joint_pusht"]
+        and "model.safetensors" in uploaded["me/ocr_joint_pusht"]
+    )
+    monkeypatch.setattr(
+        "huggingface_hub.snapshot_download", lambda repo_id, **kw: str(tmp_path / "hub" / repo_id)
+    )
     loaded = get_policy_class("ocr_joint").from_pretrained("me/ocr_joint_pusht")
     torch.testing.assert_close(loaded.manifold.means_, joint.manifold.means_)
 
@@ -224,22 +241,35 @@ def test_act_base(pusht_dataset, converted_dataset, id_pose):
     from lerobot.policies.act.configuration_act import ACTConfig
 
     cfg = ACTConfig(
-        device="cpu", push_to_hub=False, chunk_size=8, n_action_steps=8, dim_model=32, n_heads=2, dim_feedforward=64,
-        n_encoder_layers=1, n_decoder_layers=1, use_vae=False, pretrained_backbone_weights=None,
-    )  # fmt: skip
-    base = save_base_checkpoint(cfg, LeRobotDatasetMetadata("local/pusht_ocr", root=pusht_dataset), pusht_dataset.with_name("act"))
+        device="cpu",
+        push_to_hub=False,
+        chunk_size=8,
+        n_action_steps=8,
+        dim_model=32,
+        n_heads=2,
+        dim_feedforward=64,
+        n_encoder_layers=1,
+        n_decoder_layers=1,
+        use_vae=False,
+        pretrained_backbone_weights=None,
+    )
+    base = save_base_checkpoint(
+        cfg, LeRobotDatasetMetadata("local/pusht_ocr", root=pusht_dataset), pusht_dataset.with_name("act")
+    )
     joint = make_joint(base, converted_dataset, n_recovery_action_steps=2)
     assert joint.base.name == "act"
     joint.reset()
-    for poses in ([id_pose, OOD_POSE], [id_pose, OOD_POSE], [id_pose, id_pose]):  # one 2-step chunk, then back
+    for poses in (
+        [id_pose, OOD_POSE],
+        [id_pose, OOD_POSE],
+        [id_pose, id_pose],
+    ):  # one 2-step chunk, then back
         action = joint.select_action(observation(poses))
         assert action.shape == (2, 2) and torch.isfinite(action).all()
     modes = joint.ocr_stats()["in_recovery"]
     assert modes[:, 0].tolist() == [False] * 3 and modes[:, 1].tolist() == [True, True, False]
     chunk = joint.predict_action_chunk(observation([id_pose, OOD_POSE]))
     assert chunk.shape == (2, 2, 2)
-
-
 
 
 def test_a_new_batch_size_starts_new_episodes_and_reset_always_works(joint, id_pose):
@@ -249,7 +279,9 @@ def test_a_new_batch_size_starts_new_episodes_and_reset_always_works(joint, id_p
     joint.select_action(observation([OOD_POSE]))
     out = joint.select_action(observation([id_pose, OOD_POSE, id_pose]))
     assert out.shape == (3, 2)
-    assert len(joint.completed_stats) == before + 1 and joint.completed_stats[-1]["recovery_fraction"] == [1.0]
+    assert len(joint.completed_stats) == before + 1 and joint.completed_stats[-1]["recovery_fraction"] == [
+        1.0
+    ]
     joint.reset()
     joint.reset()
     assert joint.completed_stats[-1]["started_ood"] == [False, True, False]

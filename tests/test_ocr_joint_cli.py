@@ -1,4 +1,4 @@
-"""The user's three commands, in-process: lerobot-ocr convert -> lerobot-train -> lerobot-eval (via lerobot-ocr eval)."""
+"""The user's three commands, in-process: lerobot-ocr convert -> lerobot-train -> lerobot-ocr eval."""
 
 import json
 import sys
@@ -14,32 +14,80 @@ def test_convert_train_eval(pusht_dataset, diffusion_base, tmp_path, monkeypatch
     from lerobot_ocr.cli import main as ocr_main
 
     conv = tmp_path / "converted"
-    assert ocr_main([
-        "convert", "--repo-id", "local/pusht_ocr", "--root", str(pusht_dataset), "--object", "pusht_t",
-        "--pose-from", "keypoints:observation.environment_state", "--source-keypoints", "pusht_corners",
-        "--output-root", str(conv), "--output-repo-id", "local/pusht_ocr_kp",
-    ]) == 0  # fmt: skip
+    assert (
+        ocr_main(
+            [
+                "convert",
+                "--repo-id",
+                "local/pusht_ocr",
+                "--root",
+                str(pusht_dataset),
+                "--object",
+                "pusht_t",
+                "--pose-from",
+                "keypoints:observation.environment_state",
+                "--source-keypoints",
+                "pusht_corners",
+                "--output-root",
+                str(conv),
+                "--output-repo-id",
+                "local/pusht_ocr_kp",
+            ]
+        )
+        == 0
+    )
 
-    monkeypatch.setattr(sys, "argv", [
-        "lerobot-train", "--dataset.repo_id=local/pusht_ocr_kp", f"--dataset.root={conv}",
-        "--policy.type=ocr_joint", f"--policy.base_path={diffusion_base}", "--policy.device=cpu",
-        "--policy.push_to_hub=false", "--policy.down_dims=[32,64]", "--policy.diffusion_step_embed_dim=32",
-        "--policy.num_inference_steps=2", "--policy.n_components=2", "--steps=3", "--batch_size=4",
-        "--num_workers=0", "--env_eval_freq=0", "--save_freq=3", "--log_freq=1", f"--output_dir={tmp_path / 'train'}",
-    ])  # fmt: skip
+    monkeypatch.setattr(
+        sys,
+        "argv",
+        [
+            "lerobot-train",
+            "--dataset.repo_id=local/pusht_ocr_kp",
+            f"--dataset.root={conv}",
+            "--policy.type=ocr_joint",
+            f"--policy.base_path={diffusion_base}",
+            "--policy.device=cpu",
+            "--policy.push_to_hub=false",
+            "--policy.down_dims=[32,64]",
+            "--policy.diffusion_step_embed_dim=32",
+            "--policy.num_inference_steps=2",
+            "--policy.n_components=2",
+            "--steps=3",
+            "--batch_size=4",
+            "--num_workers=0",
+            "--env_eval_freq=0",
+            "--save_freq=3",
+            "--log_freq=1",
+            f"--output_dir={tmp_path / 'train'}",
+        ],
+    )
     lerobot_train.main()
     ckpt = tmp_path / "train" / "checkpoints" / "last" / "pretrained_model"
     assert (ckpt / "base" / "model.safetensors").is_file()
 
     out = tmp_path / "eval"
-    assert ocr_main([
-        "eval", f"--policy.path={ckpt}", "--env.type=pusht_ocr", "--env.region=ood", "--env.episode_length=12",
-        "--eval.n_episodes=1", "--eval.batch_size=1", "--policy.device=cpu", f"--output_dir={out}",
-    ]) == 0  # lerobot-eval's own flags, passed through  # fmt: skip
+    assert (
+        ocr_main(
+            [
+                "eval",
+                f"--policy.path={ckpt}",
+                "--env.type=pusht_ocr",
+                "--env.region=ood",
+                "--env.episode_length=12",
+                "--eval.n_episodes=1",
+                "--eval.batch_size=1",
+                "--policy.device=cpu",
+                f"--output_dir={out}",
+            ]
+        )
+        == 0
+    )  # lerobot-eval's own flags, passed through
     info = json.loads((out / "eval_info.json").read_text())
     assert info["overall"]["n_episodes"] == 1
     stats = json.loads((out / "ocr_stats.json").read_text())
-    assert stats["mean_recovery_fraction"] > 0 and stats["recovery_chunks"] >= 1  # an OOD start triggers recovery
+    assert (
+        stats["mean_recovery_fraction"] > 0 and stats["recovery_chunks"] >= 1
+    )  # an OOD start triggers recovery
     assert stats["started_ood"] == [True]  # per episode: its first observation was flagged
     # per episode, cut at its end: the rollout's done flags lined up with the policy's steps
     assert len(stats["episode_steps"]) == 1 and 1 <= stats["episode_steps"][0] <= 12

@@ -34,7 +34,9 @@ def rollout_observations(demo_poses: np.ndarray) -> list[dict]:
     out = []
     for t in range(STEPS):
         s = min(1.0, t / 24)
-        bump = 240.0 * max(0.0, 1.0 - abs(t - 16) / 5.0)  # row 0: pushed to the right around t = 12..20, then back
+        bump = 240.0 * max(
+            0.0, 1.0 - abs(t - 16) / 5.0
+        )  # row 0: pushed to the right around t = 12..20, then back
         row0 = [a[0] + bump, a[1], a[2]]
         row1 = [b[0] + 200.0 * (1 - s), b[1], b[2]]  # row 1: from the right half onto a demo pose
         states = [[row0[0] - 40.0, row0[1] + 20.0], [row1[0] + 30.0, row1[1] - 30.0]]
@@ -43,29 +45,30 @@ def rollout_observations(demo_poses: np.ndarray) -> list[dict]:
 
 
 def pinned_actions(pusht_dataset: Path, converted_dataset: Path, work: Path) -> dict[str, list]:
-    from conftest import TINY_OCR, save_base_checkpoint
     from lerobot.datasets import LeRobotDatasetMetadata
     from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
     from lerobot.policies.factory import make_policy
 
+    from conftest import TINY_DIFFUSION, TINY_OCR, save_base_checkpoint
     from lerobot_ocr.dataset_columns import read_columns
     from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
 
     cols = read_columns(converted_dataset, ["observation.object_pose"])
     demo_poses = cols["observation.object_pose"][np.argsort(cols["index"], kind="stable")]
     torch.manual_seed(0)
-    base_cfg = DiffusionConfig(
-        device="cpu", push_to_hub=False, n_obs_steps=2, horizon=8, n_action_steps=4, down_dims=(32, 64),
-        diffusion_step_embed_dim=32, num_inference_steps=2, normalization_mapping={
-            "VISUAL": "MEAN_STD", "STATE": "MIN_MAX", "ENV": "MIN_MAX", "ACTION": "MIN_MAX"},
-    )  # fmt: skip
+    lowdim = {"VISUAL": "MEAN_STD", "STATE": "MIN_MAX", "ENV": "MIN_MAX", "ACTION": "MIN_MAX"}
+    base_cfg = DiffusionConfig(**TINY_DIFFUSION, normalization_mapping=lowdim)
     meta = LeRobotDatasetMetadata("local/pusht_ocr", root=pusht_dataset)
-    base = save_base_checkpoint(base_cfg, meta, work / "pinned_base", inputs=("observation.state", "observation.environment_state"))
+    base = save_base_checkpoint(
+        base_cfg, meta, work / "pinned_base", inputs=("observation.state", "observation.environment_state")
+    )
     result = {}
     for name, schedule in SCHEDULES.items():
         torch.manual_seed(1)
         cfg = OcrJointConfig(base_path=str(base), **{**TINY_OCR, **schedule})
-        joint = make_policy(cfg, ds_meta=LeRobotDatasetMetadata("local/pusht_ocr_ocr", root=converted_dataset))
+        joint = make_policy(
+            cfg, ds_meta=LeRobotDatasetMetadata("local/pusht_ocr_ocr", root=converted_dataset)
+        )
         joint.reset()
         torch.manual_seed(2)
         actions, modes = [], []
@@ -88,9 +91,13 @@ def test_adopted_configurations_give_the_pinned_actions(pusht_dataset, converted
     got = pinned_actions(pusht_dataset, converted_dataset, tmp_path)
     for name in SCHEDULES:
         modes = np.array(got[name]["in_recovery"])
-        assert modes.any(1).all() and (~modes.astype(bool)).any(1).all(), "each row must recover and run the base"
+        assert modes.any(1).all() and (~modes.astype(bool)).any(1).all(), (
+            "each row must recover and run the base"
+        )
         assert got[name]["in_recovery"] == expected[name]["in_recovery"], name
-        np.testing.assert_allclose(got[name]["actions"], expected[name]["actions"], atol=1e-3, rtol=0, err_msg=name)
+        np.testing.assert_allclose(
+            got[name]["actions"], expected[name]["actions"], atol=1e-3, rtol=0, err_msg=name
+        )
 
 
 if __name__ == "__main__":  # regenerate the pinned file (only when a change of behaviour is intended)

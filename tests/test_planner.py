@@ -30,10 +30,14 @@ def test_trajectory_shape_start_and_delay():
     traj = plan_keypoint_trajectory(kps, vec, step_size=5.0, horizon=16, delay=torch.tensor([0, 12, 16]))
     assert traj.shape == (3, 16, 9, 2)
     torch.testing.assert_close(traj[:, 0], kps)
-    torch.testing.assert_close(traj[0, -1] - kps[0], torch.tensor([75.0, 0.0], dtype=torch.float64).expand(9, 2))
+    torch.testing.assert_close(
+        traj[0, -1] - kps[0], torch.tensor([75.0, 0.0], dtype=torch.float64).expand(9, 2)
+    )
     # delay 12: only the last 3 of t = 13, 14, 15 move (t - 12 = 1..3 steps)
     torch.testing.assert_close(traj[1, 12], kps[1])
-    torch.testing.assert_close(traj[1, -1] - kps[1], torch.tensor([0.0, 30.0], dtype=torch.float64).expand(9, 2))
+    torch.testing.assert_close(
+        traj[1, -1] - kps[1], torch.tensor([0.0, 30.0], dtype=torch.float64).expand(9, 2)
+    )
     torch.testing.assert_close(traj[2], kps[2].expand(16, 9, 2))  # delay = L: no motion
 
 
@@ -71,4 +75,3 @@ def test_fixed_delay_ignores_the_distance():
     torch.testing.assert_close(traj[1, -1, 0], torch.tensor([0.0, 4.0]))
     with pytest.raises(ValueError, match="fixed_delay"):
         RecoveryPlanner(horizon=8, fixed_delay=8)
-

@@ -31,11 +31,20 @@ def test_density_field_3d_object_on_a_table(tmp_path):
     v = field["vector"][iy_out, ix_in]
     assert v[1] > 0 and abs(v[1]) > abs(v[0])
     # The same object at the wrong height is out of distribution everywhere.
-    assert field["is_ood"].sum() < density_field(manifold, local, 0.0, extent, resolution=25, height=1.2)["is_ood"].sum()
+    assert (
+        field["is_ood"].sum()
+        < density_field(manifold, local, 0.0, extent, resolution=25, height=1.2)["is_ood"].sum()
+    )
     png = plot_density_field(
-        manifold, local, tmp_path / "nut.png", extent=extent, height=0.83, resolution=20,
-        regions={"ID": (-0.12, -0.10, 0.10, 0.22)}, training_keypoints=kps,
-    )  # fmt: skip
+        manifold,
+        local,
+        tmp_path / "nut.png",
+        extent=extent,
+        height=0.83,
+        resolution=20,
+        regions={"ID": (-0.12, -0.10, 0.10, 0.22)},
+        training_keypoints=kps,
+    )
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 

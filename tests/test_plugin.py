@@ -12,60 +12,63 @@ def _run(code: str) -> str:
 
 def test_lerobot_auto_discovers_the_distribution():
     out = _run(
-        "import sys, importlib.metadata as md\n"
-        "from lerobot.utils.import_utils import register_third_party_plugins\n"
-        "names = {d.metadata['Name'] for d in md.distributions()}\n"
-        "assert 'lerobot_policy_ocr' in names, 'distribution name must keep underscores'\n"
-        "assert 'lerobot_ocr' not in sys.modules\n"
-        "register_third_party_plugins()\n"
-        "print('lerobot_ocr' in sys.modules)\n"
+        "import sys, importlib.metadata as md\nfrom lerobot.utils.import_utils import "
+        "register_third_party_plugins\nnames = {d.metadata['Name'] for d in md.distributions()}\nassert "
+        "'lerobot_policy_ocr' in names, 'distribution name must keep underscores'\nassert 'lerobot_ocr' "
+        "not in sys.modules\nregister_third_party_plugins()\nprint('lerobot_ocr' in sys.modules)\n"
     )
     assert out.strip() == "True"
 
 
 def test_discover_packages_path_flag_loads_the_package():
     out = _run(
-        "import sys\n"
-        "from lerobot.configs.parser import load_plugin\n"
-        "load_plugin('lerobot_ocr')\n"
-        "print('lerobot_ocr' in sys.modules, 'lerobot_ocr.manifold' in sys.modules)\n"
+        "import sys\nfrom lerobot.configs.parser import "
+        "load_plugin\nload_plugin('lerobot_ocr')\nprint('lerobot_ocr' in sys.modules, "
+        "'lerobot_ocr.manifold' in sys.modules)\n"
     )
     assert out.split() == ["True", "True"]
 
 
 def test_import_is_light():
     out = _run(
-        "import sys, lerobot_ocr, lerobot_policy_ocr\n"
-        "heavy = [m for m in ('robosuite', 'mujoco', 'gym_pusht', 'pymunk', 'pygame', 'matplotlib', 'sklearn') if m in sys.modules]\n"
-        "print(heavy)\n"
+        "import sys, lerobot_ocr, lerobot_policy_ocr\nheavy = [m for m in ('robosuite', 'mujoco', "
+        "'gym_pusht', 'pymunk', 'pygame', 'matplotlib', 'sklearn') if m in sys.modules]\nprint(heavy)\n"
     )
     assert out.strip() == "[]"
 
 
 def test_policy_type_is_registered_with_lerobot_naming():
-    import lerobot_ocr  # noqa: F401
-    from lerobot.policies.factory import get_policy_class
     from lerobot.policies.factory import _make_processors_from_policy_config as processors_for
+    from lerobot.policies.factory import get_policy_class
 
+    import lerobot_ocr  # noqa: F401
     from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
 
     assert get_policy_class("ocr_joint").name == "ocr_joint"
     cfg = OcrJointConfig(device="cpu")
     pre, post = processors_for(cfg)
     names = [type(step).__name__ for step in pre.steps]
-    assert names[-1] == "NormalizerProcessorStep" and "DeviceProcessorStep" in names  # LeRobot's overrides apply
+    assert (
+        names[-1] == "NormalizerProcessorStep" and "DeviceProcessorStep" in names
+    )  # LeRobot's overrides apply
 
 
 def test_pusht_config_file_parses_with_cli_overrides():
     from pathlib import Path
 
-    import lerobot_ocr  # noqa: F401
     from lerobot.configs.train import TrainPipelineConfig
+
+    import lerobot_ocr  # noqa: F401
 
     path = Path(__file__).resolve().parents[1] / "configs" / "policy" / "ocr_joint_pusht.json"
     cfg = TrainPipelineConfig.from_pretrained(
         str(path),
-        cli_args=["--dataset.repo_id=you/pusht_ocr", "--policy.base_path=/b", "--policy.device=cpu", "--policy.down_dims=[64,128,256]"],
+        cli_args=[
+            "--dataset.repo_id=you/pusht_ocr",
+            "--policy.base_path=/b",
+            "--policy.device=cpu",
+            "--policy.down_dims=[64,128,256]",
+        ],
     )
     assert cfg.policy.type == "ocr_joint" and cfg.policy.base_path == "/b"
     assert cfg.policy.down_dims == (64, 128, 256) and cfg.policy.object_keypoints == "pusht_t"

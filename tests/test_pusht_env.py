@@ -64,7 +64,9 @@ def test_configurable_split_and_user_predicate():
     assert split(None, np.array([[0.0, 250.0], [0.0, 210.0]])) == "id"
     assert split(None, np.array([[0.0, 150.0], [0.0, 190.0]])) == "ood"
     assert split(None, np.array([[0.0, 150.0], [0.0, 210.0]])) == "neither"
-    env = make_pusht_ocr_env(region="id", region_fn=f"{__name__}:right_of_300", obs_type="environment_state_agent_pos")
+    env = make_pusht_ocr_env(
+        region="id", region_fn=f"{__name__}:right_of_300", obs_type="environment_state_agent_pos"
+    )
     for seed in range(10):
         obs, _ = env.reset(seed=seed)
         assert block_keypoints(obs["object_pose"])[:, 0].min() >= 300
@@ -94,12 +96,26 @@ def test_lerobot_eval_runs_a_random_diffusion_policy_on_ood_starts(tmp_path):
 
     out = tmp_path / "eval"
     cmd = [
-        sys.executable, "-m", "lerobot.scripts.lerobot_eval", "--env.type=pusht_ocr", "--env.region=ood",
-        "--env.episode_length=10", "--policy.type=diffusion", "--policy.device=cpu", "--policy.push_to_hub=false",
-        "--policy.down_dims=[32,64]", "--policy.horizon=8", "--policy.n_action_steps=4",
-        "--policy.num_inference_steps=2", "--policy.pretrained_backbone_weights=null", "--policy.use_group_norm=true",
-        "--policy.crop_shape=null", "--eval.n_episodes=1", "--eval.batch_size=1", f"--output_dir={out}",
-    ]  # fmt: skip
+        sys.executable,
+        "-m",
+        "lerobot.scripts.lerobot_eval",
+        "--env.type=pusht_ocr",
+        "--env.region=ood",
+        "--env.episode_length=10",
+        "--policy.type=diffusion",
+        "--policy.device=cpu",
+        "--policy.push_to_hub=false",
+        "--policy.down_dims=[32,64]",
+        "--policy.horizon=8",
+        "--policy.n_action_steps=4",
+        "--policy.num_inference_steps=2",
+        "--policy.pretrained_backbone_weights=null",
+        "--policy.use_group_norm=true",
+        "--policy.crop_shape=null",
+        "--eval.n_episodes=1",
+        "--eval.batch_size=1",
+        f"--output_dir={out}",
+    ]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr[-3000:]
     info = json.loads((out / "eval_info.json").read_text())

@@ -105,8 +105,20 @@ def test_generate_takes_the_env_settings_lerobot_eval_takes(tmp_path):
     from lerobot_ocr.dataset_columns import read_columns
 
     root = tmp_path / "ds"
-    args = ["generate", "pusht", "--episodes", "1", "--root", str(root), "--no-videos", "--seed", "3",
-            "--env.region_axis=1", "--env.region_threshold=300", "--env.id_side=high"]  # fmt: skip
+    args = [
+        "generate",
+        "pusht",
+        "--episodes",
+        "1",
+        "--root",
+        str(root),
+        "--no-videos",
+        "--seed",
+        "3",
+        "--env.region_axis=1",
+        "--env.region_threshold=300",
+        "--env.id_side=high",
+    ]
     assert main(args) == 0
     pose = read_columns(root, ["observation.object_pose"])["observation.object_pose"][0]
     assert (block_keypoints(pose)[:, 1] >= 300.0 - 1e-3).all()  # ID = the T wholly below y = 300 (high side)

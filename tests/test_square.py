@@ -159,40 +159,84 @@ def test_square_convert_train_eval(tmp_path, monkeypatch):
     from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
     from lerobot.scripts import lerobot_train
 
+    from conftest import TINY_DIFFUSION, save_base_checkpoint
     from lerobot_ocr.cli import main as ocr_main
     from lerobot_ocr.datagen.square import generate_square
-    from conftest import save_base_checkpoint
 
     data = tmp_path / "sq"
     generate_square(data, episodes=2, region="id", seed=1, images=False)
-    base_cfg = DiffusionConfig(
-        device="cpu", push_to_hub=False, n_obs_steps=2, horizon=8, n_action_steps=4, down_dims=(32, 64),
-        diffusion_step_embed_dim=32, num_inference_steps=2,
-    )  # fmt: skip
+    base_cfg = DiffusionConfig(**TINY_DIFFUSION)
     meta = LeRobotDatasetMetadata("local/square_ocr", root=data)
-    base = save_base_checkpoint(base_cfg, meta, tmp_path / "base", ("observation.state", "observation.environment_state"))
+    base = save_base_checkpoint(
+        base_cfg, meta, tmp_path / "base", ("observation.state", "observation.environment_state")
+    )
 
     conv = tmp_path / "converted"
-    assert ocr_main([
-        "convert", "--repo-id", "local/square_ocr", "--root", str(data), "--object", "axes:0.05",
-        "--pose-from", "feature:observation.object_pose", "--pose-rotation", "quat_wxyz",
-        "--output-root", str(conv), "--output-repo-id", "local/square_ocr_kp",
-    ]) == 0  # fmt: skip
+    assert (
+        ocr_main(
+            [
+                "convert",
+                "--repo-id",
+                "local/square_ocr",
+                "--root",
+                str(data),
+                "--object",
+                "axes:0.05",
+                "--pose-from",
+                "feature:observation.object_pose",
+                "--pose-rotation",
+                "quat_wxyz",
+                "--output-root",
+                str(conv),
+                "--output-repo-id",
+                "local/square_ocr_kp",
+            ]
+        )
+        == 0
+    )
     config = Path(__file__).resolve().parents[1] / "configs" / "policy" / "ocr_joint_square.json"
-    monkeypatch.setattr(sys, "argv", [
-        "lerobot-train", f"--config_path={config}", "--dataset.repo_id=local/square_ocr_kp", f"--dataset.root={conv}",
-        f"--policy.base_path={base}", "--policy.device=cpu", "--policy.down_dims=[32,64]",
-        "--policy.diffusion_step_embed_dim=32", "--policy.num_inference_steps=2", "--policy.n_components=2",
-        "--steps=2", "--batch_size=4", "--num_workers=0", "--save_freq=2", "--log_freq=1", f"--output_dir={tmp_path / 'train'}",
-    ])  # fmt: skip
+    monkeypatch.setattr(
+        sys,
+        "argv",
+        [
+            "lerobot-train",
+            f"--config_path={config}",
+            "--dataset.repo_id=local/square_ocr_kp",
+            f"--dataset.root={conv}",
+            f"--policy.base_path={base}",
+            "--policy.device=cpu",
+            "--policy.down_dims=[32,64]",
+            "--policy.diffusion_step_embed_dim=32",
+            "--policy.num_inference_steps=2",
+            "--policy.n_components=2",
+            "--steps=2",
+            "--batch_size=4",
+            "--num_workers=0",
+            "--save_freq=2",
+            "--log_freq=1",
+            f"--output_dir={tmp_path / 'train'}",
+        ],
+    )
     lerobot_train.main()
     ckpt = tmp_path / "train" / "checkpoints" / "last" / "pretrained_model"
 
     out = tmp_path / "eval"
-    assert ocr_main([
-        "eval", f"--policy.path={ckpt}", "--env.type=square_ocr", "--env.region=ood", "--env.episode_length=10",
-        "--eval.n_episodes=1", "--eval.batch_size=1", "--policy.device=cpu", f"--output_dir={out}",
-    ]) == 0  # fmt: skip
+    assert (
+        ocr_main(
+            [
+                "eval",
+                f"--policy.path={ckpt}",
+                "--env.type=square_ocr",
+                "--env.region=ood",
+                "--env.episode_length=10",
+                "--eval.n_episodes=1",
+                "--eval.batch_size=1",
+                "--policy.device=cpu",
+                f"--output_dir={out}",
+            ]
+        )
+        == 0
+    )
     assert json.loads((out / "eval_info.json").read_text())["overall"]["n_episodes"] == 1
     stats = json.loads((out / "ocr_stats.json").read_text())
     assert stats["recovery_chunks"] >= 1  # the nut on the other side of the table triggers recovery

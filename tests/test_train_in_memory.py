@@ -1,14 +1,12 @@
-"""benchmarks/train_in_memory.py: the same items as the dataset, served from memory; low-dim only."""
+"""lerobot_ocr.train_in_memory: the same items as the dataset, served from memory; low-dim only."""
 
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from train_in_memory import cache_items  # noqa: E402
+from lerobot_ocr.train_in_memory import cache_items
 
 
 def _lowdim_dataset(root: Path):
@@ -22,8 +20,13 @@ def _lowdim_dataset(root: Path):
     rng = np.random.default_rng(0)
     for _ in range(2):
         for _ in range(6):
-            ds.add_frame({"observation.state": rng.normal(size=2).astype(np.float32),
-                          "action": rng.normal(size=2).astype(np.float32), "task": "t"})  # fmt: skip
+            ds.add_frame(
+                {
+                    "observation.state": rng.normal(size=2).astype(np.float32),
+                    "action": rng.normal(size=2).astype(np.float32),
+                    "task": "t",
+                }
+            )
         ds.save_episode()
     ds.finalize()
     return LeRobotDataset("local/tiny", root=root, delta_timestamps={"action": [0.0, 0.1, 0.2]})

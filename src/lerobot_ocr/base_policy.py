@@ -30,19 +30,24 @@ class BasePolicy:
 
 
 def load_base_config(path: str | Path, revision: str | None = None) -> PreTrainedConfig:
-    """The base's config from a local folder or hub id, with a clear error when neither works."""
+    """The base's config from a local folder or hub id, with a clear error when neither works.
+
+    Raises:
+        FileNotFoundError: a local path without config.json, or a hub id the hub cannot serve.
+    """
     local = Path(path)
     if local.exists() and not (local / "config.json").is_file():
         raise FileNotFoundError(
             f"Base policy path {local} has no config.json. Point --policy.base_path at a LeRobot "
-            "`pretrained_model` folder (e.g. outputs/train/<run>/checkpoints/last/pretrained_model) or a hub id."
+            "`pretrained_model` folder (e.g. outputs/train/<run>/checkpoints/last/pretrained_model) or a "
+            "hub id."
         )
     try:
         return PreTrainedConfig.from_pretrained(str(path), revision=revision)
     except Exception as e:  # hub errors come in many types (offline, 404, auth)
         raise FileNotFoundError(
-            f"Cannot load the base policy {str(path)!r}: it is not a local folder with config.json, and the "
-            f"hub could not serve it ({type(e).__name__}: {e}). Check --policy.base_path (a local "
+            f"Cannot load the base policy {str(path)!r}: it is not a local folder with config.json, and "
+            f"the hub could not serve it ({type(e).__name__}: {e}). Check --policy.base_path (a local "
             "`pretrained_model` folder or a hub id) and your network / HF_HUB_OFFLINE setting."
         ) from e
 
@@ -55,7 +60,11 @@ def freeze(policy: PreTrainedPolicy) -> PreTrainedPolicy:
 
 
 def load_base_policy(path: str | Path, device: str | torch.device, revision: str | None = None) -> BasePolicy:
-    """Base policy + its processors from `path` (a `pretrained_model` folder or hub id), frozen, on `device`."""
+    """Base policy + its processors from `path` (a `pretrained_model` folder or hub id), frozen, on `device`.
+
+    Raises:
+        FileNotFoundError: no config.json at `path` and no hub repo, or a folder saved without processors.
+    """
     cfg = load_base_config(path, revision)
     cfg.pretrained_path = str(path)
     cfg.device = str(device)
@@ -67,7 +76,8 @@ def load_base_policy(path: str | Path, device: str | torch.device, revision: str
     if local.is_dir() and not all((local / f).is_file() for f in PROCESSOR_FILES):
         raise FileNotFoundError(
             f"Base policy folder {local} has no {' / '.join(PROCESSOR_FILES)}: it was saved without its "
-            "processors (normalisation statistics). Save it with LeRobot >= 0.4 (lerobot-train does) and retry."
+            "processors (normalisation statistics). Save it with LeRobot >= 0.4 (lerobot-train does) and "
+            "retry."
         )
     pre, post = make_pre_post_processors(
         cfg,
@@ -95,7 +105,7 @@ def observe_only(policy: PreTrainedPolicy, batch: dict[str, torch.Tensor]) -> No
 
 
 def queued_actions(policy: PreTrainedPolicy) -> int | None:
-    """How many actions the policy will pop before it plans again (None: unknown, e.g. temporal ensembling)."""
+    """Actions the policy will pop before it plans again (None: unknown, e.g. temporal ensembling)."""
     queues = getattr(policy, "_queues", None)
     if isinstance(queues, dict) and ACTION in queues:
         return len(queues[ACTION])

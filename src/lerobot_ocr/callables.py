@@ -7,7 +7,7 @@ from collections.abc import Callable
 
 
 def load_callable(spec: str, what: str = "function") -> Callable:
-    """"package.module:function" -> the function (attribute paths like "module:Class.method" work too).
+    """ "package.module:function" -> the function (attribute paths like "module:Class.method" work too).
 
     Args:
         spec: the import path, module and attribute separated by one colon.

@@ -8,9 +8,19 @@ import sys
 
 
 def _demo(args: argparse.Namespace) -> int:
+    if args.what == "pusht":
+        from lerobot_ocr.pipeline import demo
+
+        demo(args.output_dir or "outputs/demo", restart=args.restart)
+        return 0
     from lerobot_ocr.demo import run_manifold_demo
 
-    summary = run_manifold_demo(args.output_dir, episodes=args.episodes, n_components=args.n_components, seed=args.seed)
+    summary = run_manifold_demo(
+        args.output_dir or "outputs/demo_manifold",
+        episodes=args.episodes,
+        n_components=args.n_components,
+        seed=args.seed,
+    )
     print(json.dumps(summary, indent=2))
     print(f"\nDensity field with recovery arrows: {summary['picture']}")
     return 0
@@ -29,13 +39,17 @@ def env_options(task: str, args: list[str]) -> dict:
     cls = {"pusht": PushtOcrEnvConfig, "square": SquareOcrEnvConfig}[task]
     bad = [a for a in args if not (a.startswith("--env.") and "=" in a)]
     if bad:
-        raise SystemExit(f"lerobot-ocr generate: unrecognized arguments {bad}; env settings are --env.<field>=<value>.")
+        raise SystemExit(
+            f"lerobot-ocr generate: unrecognized arguments {bad}; env settings are --env.<field>=<value>."
+        )
     pairs = [a[len("--env.") :].split("=", 1) for a in args]
     try:
         cfg = draccus.parse(cls, args=[f"--{k}={v}" for k, v in pairs])
     except BaseException as e:  # draccus exits on a bad field; say which config it belongs to
         fields = sorted(f for f in cls.__dataclass_fields__ if not f.startswith("_"))
-        raise SystemExit(f"lerobot-ocr generate: bad env setting in {args}; {cls.__name__} fields: {fields}") from e
+        raise SystemExit(
+            f"lerobot-ocr generate: bad env setting in {args}; {cls.__name__} fields: {fields}"
+        ) from e
     return {k: getattr(cfg, k) for k, _ in pairs}
 
 
@@ -43,10 +57,16 @@ def _generate(args: argparse.Namespace, extra: list[str]) -> int:
     options = env_options(args.task, extra)
     region = options.pop("region", args.region)
     common = dict(
-        episodes=args.episodes, region=region, repo_id=args.repo_id or f"local/{args.task}_ocr", seed=args.seed,
-        use_videos=not args.no_videos, push_to_hub=args.push_to_hub, private=args.private, keep_work=args.keep_work,
+        episodes=args.episodes,
+        region=region,
+        repo_id=args.repo_id or f"local/{args.task}_ocr",
+        seed=args.seed,
+        use_videos=not args.no_videos,
+        push_to_hub=args.push_to_hub,
+        private=args.private,
+        keep_work=args.keep_work,
         env_options=options,
-    )  # fmt: skip
+    )
     if args.task == "pusht":
         from lerobot_ocr.datagen.pusht import generate_pusht
 
@@ -55,7 +75,10 @@ def _generate(args: argparse.Namespace, extra: list[str]) -> int:
         from lerobot_ocr.datagen.square import generate_square
 
         ds = generate_square(args.root, images=not args.no_images, **common)
-    print(f"Wrote {ds.meta.total_episodes} episodes / {ds.meta.total_frames} frames to {args.root} (repo_id {ds.repo_id}).")
+    print(
+        f"Wrote {ds.meta.total_episodes} episodes / {ds.meta.total_frames} frames to {args.root} (repo_id "
+        f"{ds.repo_id})."
+    )
     return 0
 
 
@@ -63,14 +86,22 @@ def _convert(args: argparse.Namespace) -> int:
     from lerobot_ocr.convert import convert_dataset
 
     ds = convert_dataset(
-        args.repo_id, args.output_root, args.object, args.pose_from, root=args.root,
-        output_repo_id=args.output_repo_id, pose_rotation=args.pose_rotation,
-        source_keypoints=args.source_keypoints, push_to_hub=args.push_to_hub, private=args.private,
+        args.repo_id,
+        args.output_root,
+        args.object,
+        args.pose_from,
+        root=args.root,
+        output_repo_id=args.output_repo_id,
+        pose_rotation=args.pose_rotation,
+        source_keypoints=args.source_keypoints,
+        push_to_hub=args.push_to_hub,
+        private=args.private,
         overwrite=args.overwrite,
-    )  # fmt: skip
+    )
     print(
-        f"Wrote {ds.meta.total_episodes} episodes / {ds.meta.total_frames} frames with observation.object_pose and "
-        f"observation.object_keypoints to {args.output_root} (repo_id {ds.repo_id})."
+        f"Wrote {ds.meta.total_episodes} episodes / {ds.meta.total_frames} frames with "
+        f"observation.object_pose and observation.object_keypoints to {args.output_root} (repo_id "
+        f"{ds.repo_id})."
     )
     return 0
 
@@ -88,59 +119,115 @@ def _eval(args: argparse.Namespace) -> int:
 
 
 def _add_hub_flags(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--push-to-hub", action="store_true", help="Upload the dataset to the hub under its repo id when done.")
+    parser.add_argument(
+        "--push-to-hub",
+        action="store_true",
+        help="Upload the dataset to the hub under its repo id when done.",
+    )
     parser.add_argument("--private", action="store_true", help="Make the hub repo private.")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="lerobot-ocr", description="Object-Centric Recovery for LeRobot policies.")
+    parser = argparse.ArgumentParser(
+        prog="lerobot-ocr", description="Object-Centric Recovery for LeRobot policies."
+    )
     sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="Fit the keypoint manifold on synthetic Push-T data and plot the recovery field.")
-    demo.add_argument("--output-dir", default="outputs/demo", help="Where to write the PNG, manifold and summary.")
-    demo.add_argument("--episodes", type=int, default=50, help="Synthetic demonstrations (60 frames each).")
-    demo.add_argument("--n-components", type=int, default=4, help="Gaussian components per keypoint.")
-    demo.add_argument("--seed", type=int, default=0)
+    demo = sub.add_parser(
+        "demo",
+        help="pusht (default): the whole Push-T chain at a small size (demos -> base -> convert -> ocr_joint "
+        "-> eval from OOD starts), resumable; manifold: fit the keypoint manifold on synthetic data and "
+        "plot the recovery field.",
+    )
+    demo.add_argument("what", nargs="?", choices=["pusht", "manifold"], default="pusht")
+    demo.add_argument(
+        "--output-dir", default=None, help="Work dir (default outputs/demo, or outputs/demo_manifold)."
+    )
+    demo.add_argument("--restart", action="store_true", help="pusht: start from scratch instead of resuming.")
+    demo.add_argument(
+        "--episodes", type=int, default=50, help="manifold: synthetic demonstrations (60 frames each)."
+    )
+    demo.add_argument(
+        "--n-components", type=int, default=4, help="manifold: Gaussian components per keypoint."
+    )
+    demo.add_argument(
+        "--seed", type=int, default=0, help="manifold: the seed of the synthetic data and the fit."
+    )
     demo.set_defaults(func=_demo)
 
     gen = sub.add_parser(
         "generate",
-        help="Generate scripted-expert demonstrations as a LeRobotDataset; other env settings as --env.<field>=<value>.",
+        help="Generate scripted-expert demonstrations as a LeRobotDataset; other env settings as "
+        "--env.<field>=<value>.",
     )
-    gen.add_argument("task", choices=["pusht", "square"], help="Which task (square needs the [square] extra).")
-    gen.add_argument("--region", choices=["id", "ood", "all"], default="id", help="Start region of the demos.")
-    gen.add_argument("--episodes", type=int, default=100, help="Successful episodes to keep (paper: 100 Push-T, 200 Square).")
+    gen.add_argument(
+        "task", choices=["pusht", "square"], help="Which task (square needs the [square] extra)."
+    )
+    gen.add_argument(
+        "--region", choices=["id", "ood", "all"], default="id", help="Start region of the demos."
+    )
+    gen.add_argument(
+        "--episodes",
+        type=int,
+        default=100,
+        help="Successful episodes to keep (paper: 100 Push-T, 200 Square).",
+    )
     gen.add_argument("--root", required=True, help="Output folder of the dataset (resumes if interrupted).")
-    gen.add_argument("--repo-id", default=None, help="Dataset repo id (for the hub and metadata; default local/<task>_ocr).")
+    gen.add_argument(
+        "--repo-id",
+        default=None,
+        help="Dataset repo id (for the hub and metadata; default local/<task>_ocr).",
+    )
     gen.add_argument("--seed", type=int, default=0, help="Attempt j uses env seed SEED + j.")
-    gen.add_argument("--no-videos", action="store_true", help="Store images in parquet instead of mp4 videos.")
-    gen.add_argument("--no-images", action="store_true", help="square: record low-dim observations only (no cameras).")
+    gen.add_argument(
+        "--no-videos", action="store_true", help="Store images in parquet instead of mp4 videos."
+    )
+    gen.add_argument(
+        "--no-images", action="store_true", help="square: record low-dim observations only (no cameras)."
+    )
     _add_hub_flags(gen)
     gen.add_argument("--keep-work", action="store_true", help="Keep the per-episode cache <root>.work/.")
     gen.set_defaults(func=_generate)
 
     conv = sub.add_parser(
         "convert",
-        help="Add object pose + keypoints (observation.object_pose / observation.object_keypoints) to a LeRobotDataset.",
+        help="Add object pose + keypoints (observation.object_pose / observation.object_keypoints) to a "
+        "LeRobotDataset.",
     )
     conv.add_argument("--repo-id", required=True, help="Source dataset repo id.")
-    conv.add_argument("--root", default=None, help="Local folder of the source dataset (else the HF cache / hub).")
-    conv.add_argument("--object", required=True, help="Object keypoint spec: pusht_t, pusht_corners, axes:0.05, or a .npy/.json file.")
     conv.add_argument(
-        "--pose-from", required=True,
-        help="Pose source: feature:<name> (a pose feature), keypoints:<name> (flattened world keypoints, rigidly "
-        "fitted), or estimator:<module>:<function> (called on every decoded frame).",
-    )  # fmt: skip
+        "--root", default=None, help="Local folder of the source dataset (else the HF cache / hub)."
+    )
+    conv.add_argument(
+        "--object",
+        required=True,
+        help="Object keypoint spec: pusht_t, pusht_corners, axes:0.05, or a .npy/.json file.",
+    )
+    conv.add_argument(
+        "--pose-from",
+        required=True,
+        help="Pose source: feature:<name> (a pose feature), keypoints:<name> (flattened world keypoints, "
+        "rigidly fitted), or estimator:<module>:<function> (called on every decoded frame).",
+    )
     conv.add_argument("--output-root", required=True, help="Folder of the converted dataset.")
-    conv.add_argument("--output-repo-id", default=None, help="Repo id of the converted dataset (default <repo-id>_ocr).")
-    conv.add_argument("--pose-rotation", default=None, help="Pose representation: angle (2D) | quat_wxyz | quat_xyzw | axis_angle | rot6d.")
-    conv.add_argument("--source-keypoints", default=None, help="Layout of a keypoints:<name> source (default: --object).")
+    conv.add_argument(
+        "--output-repo-id", default=None, help="Repo id of the converted dataset (default <repo-id>_ocr)."
+    )
+    conv.add_argument(
+        "--pose-rotation",
+        default=None,
+        help="Pose representation: angle (2D) | quat_wxyz | quat_xyzw | axis_angle | rot6d.",
+    )
+    conv.add_argument(
+        "--source-keypoints", default=None, help="Layout of a keypoints:<name> source (default: --object)."
+    )
     _add_hub_flags(conv)
     conv.add_argument("--overwrite", action="store_true", help="Replace an existing --output-root.")
     conv.set_defaults(func=_convert)
 
     ev = sub.add_parser(
         "eval",
-        help="Run lerobot-eval (same arguments) and add a summary table + ocr_stats.json (recovery fraction).",
+        help="Run lerobot-eval (same arguments) and add a summary table + ocr_stats.json (recovery "
+        "fraction).",
     )
     ev.add_argument("lerobot_eval_args", nargs="*", help="Arguments for lerobot-eval, incl. --output_dir=…")
     ev.set_defaults(func=_eval)

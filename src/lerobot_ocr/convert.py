@@ -46,8 +46,8 @@ _CACHE_EVERY = 256
 def _feature_info(features: dict, name: str, repo_id: str) -> dict:
     if name not in features:
         raise KeyError(
-            f"Dataset {repo_id} has no feature {name!r}. Its features: {sorted(features)}. "
-            "Pick an existing pose/keypoint feature, or use --pose-from estimator:<module>:<function>."
+            f"Dataset {repo_id} has no feature {name!r}. Its features: {sorted(features)}. Pick an "
+            "existing pose/keypoint feature, or use --pose-from estimator:<module>:<function>."
         )
     return features[name]
 
@@ -57,9 +57,9 @@ def _check_poses(poses: np.ndarray, episode: np.ndarray, frame: np.ndarray, sour
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         raise ValueError(
-            f"The pose source {source} gives NaN/inf poses for {int(bad.sum())} of {len(poses)} frames (first: "
-            f"episode {int(episode[i])}, frame {int(frame[i])}). Fix the source, or drop those episodes first "
-            "(lerobot-edit-dataset --operation.type=delete_episodes)."
+            f"The pose source {source} gives NaN/inf poses for {int(bad.sum())} of {len(poses)} frames "
+            f"(first: episode {int(episode[i])}, frame {int(frame[i])}). Fix the source, or drop those "
+            "episodes first (lerobot-edit-dataset --operation.type=delete_episodes)."
         )
 
 
@@ -82,7 +82,10 @@ def _poses_from_estimator(dataset, estimator: Callable, rotation: str, work: Pat
     for j, i in enumerate(tqdm(todo, desc="Estimating object poses", unit="frame")):
         pose = np.asarray(estimator(dataset[int(i)]), dtype=np.float64).reshape(-1)
         if pose.shape != (size,):
-            raise ValueError(f"The estimator returned shape {pose.shape} for frame {i}; a {rotation!r} pose has {size} numbers.")
+            raise ValueError(
+                f"The estimator returned shape {pose.shape} for frame {i}; a {rotation!r} pose has {size} "
+                "numbers."
+            )
         poses[i], done[i] = pose, True
         if (j + 1) % _CACHE_EVERY == 0:
             flush()
@@ -91,13 +94,19 @@ def _poses_from_estimator(dataset, estimator: Callable, rotation: str, work: Pat
 
 
 def source_feature(pose_from: str | Callable, features: dict, repo_id: str) -> str | None:
-    """The dataset feature a `feature:`/`keypoints:` pose source reads (None for an estimator); validates it."""
+    """The feature a `feature:`/`keypoints:` pose source reads (None for an estimator); validates it.
+
+    Raises:
+        ValueError: an unknown pose source.
+        KeyError: the feature is not in the dataset.
+    """
     if callable(pose_from) or str(pose_from).startswith("estimator:"):
         return None
     kind, _, name = str(pose_from).partition(":")
     if kind not in ("feature", "keypoints") or not name:
         raise ValueError(
-            f"Unknown --pose-from {pose_from!r}: use 'feature:<name>', 'keypoints:<name>' or 'estimator:<module>:<fn>'."
+            f"Unknown --pose-from {pose_from!r}: use 'feature:<name>', 'keypoints:<name>' or "
+            "'estimator:<module>:<fn>'."
         )
     _feature_info(features, name, repo_id)
     return name
@@ -114,6 +123,10 @@ def compute_object_poses(
     """(N, P) object poses of every frame in the dataset's file order, from the chosen source.
 
     `columns` holds the source feature's column (see `source_feature`), read with `read_columns`.
+
+    Raises:
+        ValueError: the feature's size does not fit the keypoint layout or the pose representation,
+            or a pose is NaN/inf.
     """
     if callable(pose_from) or str(pose_from).startswith("estimator:"):
         fn = pose_from if callable(pose_from) else load_callable(str(pose_from).split(":", 1)[1], "estimator")
@@ -130,8 +143,9 @@ def compute_object_poses(
     k, d = source_keypoints.shape
     if values.shape[1] != k * d:
         raise ValueError(
-            f"Keypoint spec mismatch: feature {name!r} has {values.shape[1]} numbers per frame, but the source "
-            f"keypoint spec has {k} points in {d}D ({k * d} numbers). Pass --source-keypoints with its layout."
+            f"Keypoint spec mismatch: feature {name!r} has {values.shape[1]} numbers per frame, but the "
+            f"source keypoint spec has {k} points in {d}D ({k * d} numbers). Pass --source-keypoints with "
+            "its layout."
         )
     spread = float(np.linalg.norm(source_keypoints - source_keypoints.mean(0), axis=1).max())
     transforms = keypoints_to_pose(values.reshape(-1, k, d), source_keypoints, max_rms_error=0.05 * spread)
@@ -162,6 +176,11 @@ def convert_dataset(
         source_keypoints: layout of a "keypoints:" source feature (default: `object_keypoints`).
     Returns:
         The converted LeRobotDataset.
+
+    Raises:
+        FileExistsError: `output_root` exists and `overwrite` is off.
+        ValueError: keypoints and pose disagree in dimension, the dataset is converted already, or
+            its pose feature differs from the source's poses.
     """
     from lerobot.datasets import LeRobotDataset
     from lerobot.datasets.dataset_tools import add_features, recompute_stats
@@ -175,7 +194,9 @@ def convert_dataset(
     output_root = Path(output_root)
     if output_root.exists():
         if not overwrite:
-            raise FileExistsError(f"{output_root} already exists; pass --overwrite or choose another --output-root.")
+            raise FileExistsError(
+                f"{output_root} already exists; pass --overwrite or choose another --output-root."
+            )
     staging = output_root.with_name(output_root.name + ".tmp")
     work = output_root.with_name(output_root.name + ".work")
 
@@ -199,8 +220,8 @@ def convert_dataset(
         existing = columns[OBS_OBJECT_POSE].reshape(len(poses), -1)
         if existing.shape[1] != poses.shape[1] or not np.allclose(existing, poses, atol=1e-3):
             raise ValueError(
-                f"Dataset {repo_id} already has {OBS_OBJECT_POSE!r} and it differs from the poses of {pose_from!r}. "
-                f"Use --pose-from feature:{OBS_OBJECT_POSE} to keep it."
+                f"Dataset {repo_id} already has {OBS_OBJECT_POSE!r} and it differs from the poses of "
+                f"{pose_from!r}. Use --pose-from feature:{OBS_OBJECT_POSE} to keep it."
             )
     else:
         new[OBS_OBJECT_POSE] = (
@@ -208,7 +229,9 @@ def convert_dataset(
             {"dtype": "float32", "shape": (poses.shape[1],), "names": POSE_NAMES[rotation]},
         )
     if OBS_OBJECT_KEYPOINTS in features:
-        raise ValueError(f"Dataset {repo_id} already has {OBS_OBJECT_KEYPOINTS!r}: it looks converted already.")
+        raise ValueError(
+            f"Dataset {repo_id} already has {OBS_OBJECT_KEYPOINTS!r}: it looks converted already."
+        )
 
     if staging.exists():
         shutil.rmtree(staging)
@@ -216,7 +239,10 @@ def convert_dataset(
     converted = add_features(dataset, new, output_dir=staging, repo_id=out_id)
     recompute_stats(converted)
     (staging / "meta" / "ocr_object.json").write_text(
-        json.dumps({"object_keypoints": local.tolist(), "pose_rotation": rotation, "pose_from": str(pose_from)}, indent=2)
+        json.dumps(
+            {"object_keypoints": local.tolist(), "pose_rotation": rotation, "pose_from": str(pose_from)},
+            indent=2,
+        )
     )
     if output_root.exists():
         shutil.rmtree(output_root)
@@ -226,4 +252,3 @@ def convert_dataset(
     if push_to_hub:
         converted.push_to_hub(private=private)
     return converted
-

@@ -18,10 +18,16 @@ META_COLUMNS = ("index", "episode_index", "frame_index")
 
 
 def parquet_files(root: str | Path) -> list[Path]:
-    """The dataset's data files in LeRobot's global frame order (as `dataset_tools` iterates them)."""
+    """The dataset's data files in LeRobot's global frame order (as `dataset_tools` iterates them).
+
+    Raises:
+        FileNotFoundError: `root` holds no LeRobotDataset v3 parquet files.
+    """
     files = sorted((Path(root) / "data").glob("*/*.parquet"))
     if not files:
-        raise FileNotFoundError(f"No parquet files under {Path(root) / 'data'}: is {root} a LeRobotDataset v3 root?")
+        raise FileNotFoundError(
+            f"No parquet files under {Path(root) / 'data'}: is {root} a LeRobotDataset v3 root?"
+        )
     return files
 
 
@@ -29,6 +35,9 @@ def read_columns(root: str | Path, keys: list[str] | tuple[str, ...]) -> dict[st
     """Columns `keys` (+ index, episode_index, frame_index) of every frame, in file order.
 
     Returns {key: (N, ...) array}; vector features are stacked to (N, dim).
+
+    Raises:
+        KeyError: a requested column is missing.
     """
     wanted = list(dict.fromkeys([*META_COLUMNS, *keys]))
     frames = []
@@ -37,8 +46,8 @@ def read_columns(root: str | Path, keys: list[str] | tuple[str, ...]) -> dict[st
         missing = [k for k in wanted if k not in df.columns]
         if missing:
             raise KeyError(
-                f"Dataset at {root} has no column(s) {missing} (it has {sorted(df.columns)}). "
-                "Run `lerobot-ocr convert` to add the object pose and keypoints."
+                f"Dataset at {root} has no column(s) {missing} (it has {sorted(df.columns)}). Run "
+                "`lerobot-ocr convert` to add the object pose and keypoints."
             )
         frames.append(df[wanted])
     df = pd.concat(frames, ignore_index=True)
@@ -61,7 +70,9 @@ def episode_last_positions(episode_index: np.ndarray) -> np.ndarray:
 
 
 @numpy_compatible
-def window_positions(start: torch.Tensor, last: torch.Tensor, horizon: int) -> tuple[torch.Tensor, torch.Tensor]:
+def window_positions(
+    start: torch.Tensor, last: torch.Tensor, horizon: int
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Windows of `horizon` frames from each start, clamped to the episode's last frame.
 
     Args:

@@ -17,13 +17,17 @@ from lerobot_ocr.plotting import plot_density_field
 from lerobot_ocr.synthetic import synthetic_pusht_keypoints
 
 
-def run_manifold_demo(output_dir: str | Path, episodes: int = 50, n_components: int = 4, seed: int = 0) -> dict:
+def run_manifold_demo(
+    output_dir: str | Path, episodes: int = 50, n_components: int = 4, seed: int = 0
+) -> dict:
     """Fit, calibrate, plan one recovery from an OOD start, save a PNG, a manifold file and a summary."""
     out = Path(output_dir)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     train = synthetic_pusht_keypoints(n_episodes=episodes, seed=seed)
-    manifold = KeypointManifold(n_components=n_components, random_state=seed).fit(train, calibration_quantile=0.02)
+    manifold = KeypointManifold(n_components=n_components, random_state=seed).fit(
+        train, calibration_quantile=0.02
+    )
     fit_s = time.perf_counter() - t0
 
     # An out-of-distribution start: the T in the right half of the workspace.
@@ -33,7 +37,11 @@ def run_manifold_demo(output_dir: str | Path, episodes: int = 50, n_components: 
     planner = RecoveryPlanner(horizon=16, step_size=5.0, d_min=20.0, d_max=80.0)
     traj = planner(ood_kps, rec.vector, distance=torch.tensor([30.0]))
     picture = plot_density_field(
-        manifold, PUSHT_T_KEYPOINTS, out / "density_field.png", angle=float(np.pi / 4), training_keypoints=train
+        manifold,
+        PUSHT_T_KEYPOINTS,
+        out / "density_field.png",
+        angle=float(np.pi / 4),
+        training_keypoints=train,
     )
     manifold_path = manifold.save(out / "manifold.safetensors")
     summary = {

@@ -2,10 +2,11 @@
 
 Runs LeRobot's own eval in-process with the arguments given (`--policy.path=… --env.type=… …`).
 When the policy is `ocr_joint`, its per-batch `ocr_stats()` are collected and written to
-`<output_dir>/ocr_stats.json` (mean fraction of steps in recovery, recovery chunks, hand-backs, and per
-episode whether the switch flagged its first observation, so that successes split by where they started, its steps, fraction in recovery, first
-step on the base and last mode). Per-episode stats stop at the episode's end: LeRobot keeps every env of
-a batch stepping (frozen) until the last one is done, and the policy keeps acting on the finished ones.
+`<output_dir>/ocr_stats.json`: mean fraction of steps in recovery, recovery chunks, hand-backs, and per
+episode whether the switch flagged its first observation (so successes split by where they started),
+its steps, fraction in recovery, first step on the base and last mode. Per-episode stats stop at the
+episode's end: LeRobot keeps every env of a batch stepping (frozen) until the last one is done, and the
+policy keeps acting on the finished ones.
 """
 
 from __future__ import annotations
@@ -40,7 +41,8 @@ def episode_steps(done) -> list[int]:
 
 def episode_modes(in_recovery, steps: list[int] | None = None) -> dict[str, list]:
     """(T, B) bool modes of one rollout (+ per-row episode steps; None = all T) -> per row: its fraction of
-    steps in recovery, its first step on the base (-1: never handed back) and whether its last step recovered."""
+    steps in recovery, its first step on the base (-1: never handed back) and whether its last step
+    recovered."""
     modes = np.asarray(in_recovery, dtype=bool)
     steps = [modes.shape[0]] * modes.shape[1] if steps is None else steps
     rows = [modes[:n, b] for b, n in enumerate(steps)]
@@ -97,7 +99,10 @@ def format_start_split(rows: dict[str, dict]) -> str:
         if "started_ood" not in r:
             continue
         parts = []
-        for key, what in (("started_ood", "started out of distribution (recovery first)"), ("started_id", "started on the base")):
+        for key, what in (
+            ("started_ood", "started out of distribution (recovery first)"),
+            ("started_id", "started on the base"),
+        ):
             k, n = r[key]["successes"], r[key]["episodes"]
             parts.append(f"{n} {what}: {k} succeeded" + (f" ({k / n:.2f})" if n else ""))
         line = f"{name}: " + "; ".join(parts)
@@ -106,7 +111,8 @@ def format_start_split(rows: dict[str, dict]) -> str:
             mean = flagged["mean_first_base_step"]
             line += (
                 f". Recovery-first failures: {flagged['failed_never_handed_back']} never handed back, "
-                f"{flagged['failed_in_recovery']} ended in a later recovery, {flagged['failed_on_base']} ended on the base"
+                f"{flagged['failed_in_recovery']} ended in a later recovery, {flagged['failed_on_base']} "
+                "ended on the base"
                 + (f"; first hand-back at step {mean:.0f} on average" if mean is not None else "")
             )
         lines.append(line)
@@ -114,7 +120,11 @@ def format_start_split(rows: dict[str, dict]) -> str:
 
 
 def run_eval(args: list[str]) -> dict:
-    """Run lerobot-eval with `args` (CLI strings) in this process; return `summarize(...)`."""
+    """Run lerobot-eval with `args` (CLI strings) in this process; return `summarize(...)`.
+
+    Raises:
+        ValueError: no `--output_dir=` among `args`.
+    """
     from lerobot.scripts import lerobot_eval
 
     from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
@@ -187,7 +197,7 @@ def format_table(rows: dict[str, dict]) -> str:
     for name, r in rows.items():
         rec = f"{100 * r['mean_recovery_fraction']:.0f}%" if "mean_recovery_fraction" in r else "—"
         lines.append(
-            f"| {name} | {r['success_rate']:.2f} | [{r['ci95'][0]:.2f}, {r['ci95'][1]:.2f}] | {r['n_episodes']} "
-            f"| {r['avg_max_reward']:.2f} | {rec} |"
+            f"| {name} | {r['success_rate']:.2f} | [{r['ci95'][0]:.2f}, {r['ci95'][1]:.2f}] | "
+            f"{r['n_episodes']} | {r['avg_max_reward']:.2f} | {rec} |"
         )
     return "\n".join(lines)

@@ -1,4 +1,7 @@
-"""Keypoint inverse policy pi_inv (OCR §5): keypoint trajectory + proprioception -> the actions that make it.
+"""Keypoint inverse policy pi_inv: keypoint trajectory + proprioception -> the actions that make it.
+
+The paper's keypoint inverse policy (arXiv 2411.03294, Gao, Li, Figueroa 2024), trained by behaviour
+cloning on windows of the demonstrations.
 
 A low-dimensional diffusion policy built on LeRobot's `DiffusionModel` (its conditional U-Net and
 DDPM/DDIM schedulers): the condition is the L-frame keypoint trajectory and the robot state, the
@@ -35,7 +38,7 @@ class KeypointInversePolicy(nn.Module):
         state_dim, action_dim: world-frame sizes S and A.
         horizon: L, frames per keypoint trajectory = actions per sample.
         state_frame, action_frame: frame specs ("point", "pose:<rotation>", "none").
-        **diffusion_kwargs: `DiffusionConfig` fields (down_dims, noise_scheduler_type, num_inference_steps, ...).
+        **diffusion_kwargs: `DiffusionConfig` fields (down_dims, noise_scheduler_type, ...).
 
     Learned attributes (buffers, set by `fit_normalization`): keypoint_mean_ / keypoint_std_ (K, D),
     state_mean_ / state_std_ (S'), action_min_ / action_max_ (A'), in object-frame units.
@@ -84,12 +87,21 @@ class KeypointInversePolicy(nn.Module):
 
     # ------------------------------------------------------------------ object frame ("zero-out")
     def to_object_frame(
-        self, keypoints: torch.Tensor, state: torch.Tensor, frame: torch.Tensor, actions: torch.Tensor | None = None
+        self,
+        keypoints: torch.Tensor,
+        state: torch.Tensor,
+        frame: torch.Tensor,
+        actions: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
-        """World (B, L, K, D), (B, S), [(B, L, A)] -> the same in the object frame `frame` (B, D+1, D+1)."""
+        """World (B, L, K, D), (B, S), [(B, L, A)] -> the same in the object frame `frame` (B, D+1, D+1).
+
+        Raises:
+            ValueError: keypoints of the wrong shape.
+        """
         if keypoints.ndim != 4 or keypoints.shape[1:] != (self.horizon, self.n_keypoints, self.dim):
             raise ValueError(
-                f"keypoints must be (B, {self.horizon}, {self.n_keypoints}, {self.dim}), got {tuple(keypoints.shape)}."
+                f"keypoints must be (B, {self.horizon}, {self.n_keypoints}, {self.dim}), got "
+                f"{tuple(keypoints.shape)}."
             )
         frame = frame.to(keypoints.dtype)
         kp = transform_points(invert(frame)[:, None], keypoints)
@@ -102,7 +114,7 @@ class KeypointInversePolicy(nn.Module):
     def fit_normalization(
         self, keypoints: torch.Tensor, state: torch.Tensor, actions: torch.Tensor, margin: float = 0.1
     ) -> KeypointInversePolicy:
-        """Statistics of OBJECT-FRAME training windows: keypoints (N, L, K, D), state (N, S'), actions (N, L, A').
+        """Statistics of OBJECT-FRAME windows: keypoints (N, L, K, D), state (N, S'), actions (N, L, A').
 
         Actions are min-max scaled to [-1, 1] (the diffusion sampler clips there), widened by
         `margin` of their range on each side; conditions are standardised.
@@ -155,11 +167,21 @@ class KeypointInversePolicy(nn.Module):
 
     @torch.no_grad()
     def sample(
-        self, keypoints: torch.Tensor, state: torch.Tensor, frame: torch.Tensor, noise: torch.Tensor | None = None
+        self,
+        keypoints: torch.Tensor,
+        state: torch.Tensor,
+        frame: torch.Tensor,
+        noise: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """Actions (B, L, A) in the world frame that move the keypoints along `keypoints` (B, L, K, D)."""
+        """Actions (B, L, A) in the world frame that move the keypoints along `keypoints` (B, L, K, D).
+
+        Raises:
+            RuntimeError: `fit_normalization` was never called.
+        """
         if not bool(self.fitted_):
-            raise RuntimeError("The inverse policy has no normalisation statistics: call fit_normalization first.")
+            raise RuntimeError(
+                "The inverse policy has no normalisation statistics: call fit_normalization first."
+            )
         kp, st, _ = self.to_object_frame(keypoints, state, frame)
         actions = self.diffusion.generate_actions(self._condition(kp, st), noise=noise)
         actions = self._unnormalize_action(actions.to(kp.dtype))

@@ -1,4 +1,4 @@
-"""Object keypoint sets (object frame) and pose <-> keypoint conversion.
+"""Object keypoint sets (object frame) and pose <-> keypoint conversion (arXiv 2411.03294: rho_k = T p_k).
 
 A keypoint set is a (K, d) array of points in the OBJECT frame. World keypoints for a pose T
 (homogeneous, see `geometry.rigid`) are rho_k = T · p_k; the reverse, world keypoints -> pose, is a
@@ -21,25 +21,41 @@ from lerobot_ocr.validation import check_finite, check_trailing_shape
 # object frame, pixels; body origin at the crossbar edge, centre of mass at (0, 45)).
 PUSHT_T_KEYPOINTS = np.array(
     [
-        [9.27, 90.04], [-60.98, -1.19], [60.91, -1.39], [-0.27, 25.54], [-14.06, 122.82],
-        [39.00, 32.86], [-39.97, 32.73], [-16.82, 62.86], [23.54, -1.70],
+        [9.27, 90.04],
+        [-60.98, -1.19],
+        [60.91, -1.39],
+        [-0.27, 25.54],
+        [-14.06, 122.82],
+        [39.00, 32.86],
+        [-39.97, 32.73],
+        [-16.82, 62.86],
+        [23.54, -1.70],
     ]
-)  # fmt: skip
+)
 
 # The 8 polygon corners of the T in gym-pusht's `environment_state` order (crossbar, then stem),
 # i.e. the layout of LeRobot's `pusht_keypoints` datasets: environment_state.reshape(8, 2).
 PUSHT_T_CORNERS = np.array(
     [
-        [-60.0, 0.0], [60.0, 0.0], [60.0, 30.0], [-60.0, 30.0],
-        [-15.0, 30.0], [15.0, 30.0], [15.0, 120.0], [-15.0, 120.0],
+        [-60.0, 0.0],
+        [60.0, 0.0],
+        [60.0, 30.0],
+        [-60.0, 30.0],
+        [-15.0, 30.0],
+        [15.0, 30.0],
+        [15.0, 120.0],
+        [-15.0, 120.0],
     ]
-)  # fmt: skip
+)
 
 
 def axis_tip_keypoints(size: float = 0.05, dim: int = 3, include_origin: bool = False) -> np.ndarray:
     """Tips of the object-frame axes at distance `size`: (d, d), or (d+1, d) with the origin first.
 
     The OCR paper's 3D keypoints are the x, y, z tips at 5 cm (Square nut, bottle).
+
+    Raises:
+        ValueError: a size <= 0.
     """
     if size <= 0:
         raise ValueError(f"Axis tip size must be positive, got {size}.")
@@ -61,6 +77,10 @@ def resolve_keypoints(spec: str | np.ndarray | list) -> np.ndarray:
     - "pusht_t" (9 paper keypoints) or "pusht_corners" (8 corners, the `pusht_keypoints` layout);
     - "axes:<size>" or "axes+origin:<size>" (3D axis tips, e.g. "axes:0.05");
     - a path to a .npy file or a .json file holding a (K, d) list.
+
+    Raises:
+        ValueError: an unknown or malformed spec, or an array that is not (K, 2|3).
+        FileNotFoundError: a file spec that does not exist.
     """
     if not isinstance(spec, str):
         arr = np.asarray(spec, dtype=np.float64)
@@ -76,7 +96,11 @@ def resolve_keypoints(spec: str | np.ndarray | list) -> np.ndarray:
         path = Path(spec)
         if not path.is_file():
             raise FileNotFoundError(f"Keypoint file {path} does not exist.")
-        arr = np.load(path) if path.suffix == ".npy" else np.asarray(json.loads(path.read_text()), dtype=np.float64)
+        arr = (
+            np.load(path)
+            if path.suffix == ".npy"
+            else np.asarray(json.loads(path.read_text()), dtype=np.float64)
+        )
     else:
         raise ValueError(
             f"Unknown keypoint spec {spec!r}. Use 'pusht_t', 'pusht_corners', 'axes:<size>', "
@@ -89,7 +113,9 @@ def resolve_keypoints(spec: str | np.ndarray | list) -> np.ndarray:
 
 
 @numpy_compatible
-def pose_to_keypoints(pose: torch.Tensor, local_keypoints: torch.Tensor, rotation: str | None = None) -> torch.Tensor:
+def pose_to_keypoints(
+    pose: torch.Tensor, local_keypoints: torch.Tensor, rotation: str | None = None
+) -> torch.Tensor:
     """World keypoints of an object at `pose`.
 
     Args:
@@ -98,14 +124,17 @@ def pose_to_keypoints(pose: torch.Tensor, local_keypoints: torch.Tensor, rotatio
         local_keypoints: (K, d) object-frame keypoints.
     Returns:
         (..., K, d) world keypoints.
+
+    Raises:
+        ValueError: keypoints and pose of different dimensions.
     """
     transform = pose if rotation is None else pose_to_matrix(pose, rotation)
     local = local_keypoints.to(transform.dtype)
     d = local.shape[-1]
     if transform.shape[-1] != d + 1:
         raise ValueError(
-            f"Keypoint spec mismatch: keypoints are {d}D but the pose is "
-            f"{transform.shape[-1] - 1}D (pose shape {tuple(pose.shape)})."
+            f"Keypoint spec mismatch: keypoints are {d}D but the pose is {transform.shape[-1] - 1}D (pose "
+            f"shape {tuple(pose.shape)})."
         )
     return transform_points(transform, local)
 
@@ -129,8 +158,8 @@ def keypoints_to_pose(
         keypoints,
         tuple(local.shape),
         "keypoints",
-        f"The object keypoint spec has {local.shape[0]} points in {local.shape[1]}D; "
-        "pass keypoints in the same order and dimension.",
+        f"The object keypoint spec has {local.shape[0]} points in {local.shape[1]}D; pass keypoints in "
+        "the same order and dimension.",
     )
     check_finite(keypoints, "keypoints", "Drop or repair frames with missing keypoints.")
     transform = fit_rigid_transform(local.expand_as(keypoints), keypoints)

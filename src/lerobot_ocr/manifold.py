@@ -1,5 +1,10 @@
 """Keypoint manifold: one Gaussian mixture per keypoint, evaluated in closed form in torch.
 
+The paper's manifold estimate and recovery vector (arXiv 2411.03294): p(rho | theta_k) = sum_m
+lambda_km N(rho; mu_km, Sigma_km) per keypoint k, delta_k^mod = q(|grad p_k|) grad p_k / |grad p_k| with
+q(x) = exp((phi - x) / eta), and delta_rec = mean_k delta_k^mod; `recovery` documents our log-space
+variant and the "log_deficit" magnitude.
+
 Fitting reuses scikit-learn's `GaussianMixture` (EM). The fitted parameters are exported into torch
 buffers so that, for a batch of keypoint sets, the per-keypoint log density, its gradient and the
 recovery vector are computed in one vectorised pass: no distribution objects, no autograd.
@@ -27,7 +32,6 @@ from torch import nn
 
 from lerobot_ocr.files import atomic_write
 from lerobot_ocr.validation import check_finite, check_trailing_shape
-
 
 
 class NotFittedError(ValueError, AttributeError):
@@ -146,22 +150,29 @@ class KeypointManifold(nn.Module):
             x,
             (self.n_keypoints, self.dim),
             name,
-            f"The manifold was fitted on {self.n_keypoints} keypoints in {self.dim}D; "
-            "use the same keypoint spec as the training data.",
+            f"The manifold was fitted on {self.n_keypoints} keypoints in {self.dim}D; use the same "
+            "keypoint spec as the training data.",
         )
         check_finite(x, name, "The object pose/keypoints are missing (NaN) for some rows.")
         return x
 
     # ------------------------------------------------------------------------------------- fit
-    def fit(self, keypoints: np.ndarray | torch.Tensor, calibration_quantile: float | None = 0.02) -> KeypointManifold:
+    def fit(
+        self, keypoints: np.ndarray | torch.Tensor, calibration_quantile: float | None = 0.02
+    ) -> KeypointManifold:
         """Fit one GaussianMixture per keypoint on (N, K, D) keypoints; return self.
 
         If `calibration_quantile` is set, the OOD threshold is calibrated on the same data
         (see `calibrate`).
+
+        Raises:
+            ValueError: keypoints not (N, K, 2|3), or fewer frames than components.
         """
         from sklearn.mixture import GaussianMixture
 
-        x = np.asarray(keypoints.detach().cpu() if isinstance(keypoints, torch.Tensor) else keypoints, dtype=np.float64)
+        x = np.asarray(
+            keypoints.detach().cpu() if isinstance(keypoints, torch.Tensor) else keypoints, dtype=np.float64
+        )
         if x.ndim != 3 or x.shape[-1] not in (2, 3):
             raise ValueError(f"keypoints must have shape (N, K, D) with D in (2, 3), got {x.shape}.")
         check_finite(x, "training keypoints", "Drop frames whose object pose is missing before fitting.")
@@ -216,7 +227,7 @@ class KeypointManifold(nn.Module):
 
     # ------------------------------------------------------------------------------ evaluation
     def _log_components(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Whitened offsets y = L^T (x - mu) (..., K, M, D) and log weighted component densities (..., K, M)."""
+        """Whitened offsets y = L^T (x - mu) (..., K, M, D), log weighted component densities (..., K, M)."""
         diff = x.unsqueeze(-2) - self.means_  # (..., K, M, D)
         y = (diff.unsqueeze(-2) @ self.precisions_cholesky_).squeeze(-2)
         return y, self.log_coef_ - 0.5 * y.square().sum(-1)
@@ -270,6 +281,9 @@ class KeypointManifold(nn.Module):
 
         With quantile q, a fraction q of the given (in-distribution) frames counts as OOD. Also sets
         per-keypoint log-density thresholds, used by the "log_deficit" magnitude.
+
+        Raises:
+            ValueError: a quantile outside [0, 1).
         """
         if not 0.0 <= quantile < 1.0:
             raise ValueError(f"quantile must be in [0, 1), got {quantile}.")
@@ -292,7 +306,11 @@ class KeypointManifold(nn.Module):
         return self
 
     def is_ood(self, keypoints: torch.Tensor | np.ndarray) -> torch.Tensor:
-        """(..., K, D) -> (...,) bool: score below the calibrated threshold."""
+        """(..., K, D) -> (...,) bool: score below the calibrated threshold.
+
+        Raises:
+            NotFittedError: no threshold yet.
+        """
         if not self.is_calibrated:
             raise NotFittedError("No OOD threshold: call calibrate(keypoints) or set_threshold(value).")
         return self.score(keypoints) < self.threshold_
@@ -365,7 +383,10 @@ class KeypointManifold(nn.Module):
         self._check_fitted()
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        meta = {"hyperparameters": json.dumps(self.hyperparameters()), "format": "lerobot_ocr.KeypointManifold/1"}
+        meta = {
+            "hyperparameters": json.dumps(self.hyperparameters()),
+            "format": "lerobot_ocr.KeypointManifold/1",
+        }
         if self.calibration_quantile is not None:
             meta["calibration_quantile"] = repr(self.calibration_quantile)
         tensors = {k: v.contiguous() for k, v in self.state_dict().items()}
@@ -373,7 +394,12 @@ class KeypointManifold(nn.Module):
 
     @classmethod
     def load(cls, path: str | Path) -> KeypointManifold:
-        """Load a manifold written by `save`."""
+        """Load a manifold written by `save`.
+
+        Raises:
+            FileNotFoundError: no file at `path`.
+            ValueError: not a KeypointManifold file.
+        """
         from safetensors import safe_open
 
         path = Path(path)

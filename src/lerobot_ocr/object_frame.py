@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import torch
 
 from lerobot_ocr.geometry import compose, invert, matrix_to_pose, pose_size, pose_to_matrix, transform_points
-from lerobot_ocr.geometry.rotations import matrix_to_rotation_6d, rotation_6d_to_matrix
 from lerobot_ocr.geometry.rigid import make_transform
+from lerobot_ocr.geometry.rotations import matrix_to_rotation_6d, rotation_6d_to_matrix
 
 KINDS = ("point", "pose", "none")
 
@@ -37,13 +37,18 @@ class FrameSpec:
 
     @classmethod
     def parse(cls, spec: str | FrameSpec) -> FrameSpec:
+        """A spec string ("point", "none", "pose:<rotation>") or a FrameSpec -> a FrameSpec.
+
+        Raises:
+            ValueError: an unknown spec.
+        """
         if isinstance(spec, FrameSpec):
             return spec
         kind, _, rotation = str(spec).partition(":")
         if kind not in KINDS or (kind == "pose") != bool(rotation):
             raise ValueError(
-                f"Unknown frame spec {spec!r}. Use 'point', 'none', or 'pose:<rotation>' with rotation one of "
-                "angle, quat_wxyz, quat_xyzw, axis_angle, rot6d (e.g. 'pose:axis_angle')."
+                f"Unknown frame spec {spec!r}. Use 'point', 'none', or 'pose:<rotation>' with rotation one "
+                "of angle, quat_wxyz, quat_xyzw, axis_angle, rot6d (e.g. 'pose:axis_angle')."
             )
         if rotation:
             pose_size(rotation)  # validates the representation
@@ -63,12 +68,18 @@ class FrameSpec:
         return n - self.world_size(dim) + dim + rot_size
 
     def check(self, n: int, dim: int, name: str) -> None:
+        """Check that a vector of `n` numbers fits this spec for a `dim`-D object (`name`: for the error).
+
+        Raises:
+            ValueError: a spec that does not fit the object's dimension or the vector's size.
+        """
         if self.kind == "pose" and (2 if self.rotation == "angle" else 3) != dim:
             raise ValueError(f"{name} frame spec 'pose:{self.rotation}' does not fit a {dim}D object pose.")
         if n < self.world_size(dim):
             raise ValueError(
-                f"{name} has {n} numbers but frame spec {self.kind}{':' + self.rotation if self.rotation else ''} "
-                f"needs at least {self.world_size(dim)} for a {dim}D object. Fix the spec or the feature."
+                f"{name} has {n} numbers but frame spec "
+                f"{self.kind}{':' + self.rotation if self.rotation else ''} needs at least "
+                f"{self.world_size(dim)} for a {dim}D object. Fix the spec or the feature."
             )
 
 

@@ -1,4 +1,7 @@
-"""Recovery keypoint planner (OCR): a keypoint trajectory that moves the object along the recovery vector.
+"""Recovery keypoint planner: a keypoint trajectory that moves the object along the recovery vector.
+
+The paper's planner (arXiv 2411.03294): zeta_t = rho + max(0, t - df(d)) alpha delta_rec, t = 0..L-1,
+with df(d) the delay that lets the robot reach the object first.
 
 Shapes: keypoints (B, K, D) world frame; trajectories (B, L, K, D) whose frame 0 is the current
 keypoints (the same convention as the inverse policy's training windows).
@@ -18,14 +21,16 @@ def recovery_delay(distance: torch.Tensor | float, d_min: float, d_max: float, h
 
     df = 0 for d <= d_min (the end effector is at the object: push right away), df = horizon for
     d >= d_max (too far: hold still, approach only), linear in between, rounded down. This is the
-    authors' real-robot formula `16 - clip(int(16 - 16 (d - d_min)/(d_max - d_min)), 0, 16)`.
-    (OCR_METHOD.md states the ramp the other way round; holding still when the robot is far is the
-    behaviour the method needs and what the code does.)
+    authors' real-robot formula `16 - clip(int(16 - 16 (d - d_min)/(d_max - d_min)), 0, 16)` (holding
+    still while the robot is far is what the method needs, whatever the direction a text gives the ramp).
 
     Args:
         distance: (...,) end-effector-to-object distance, in the keypoints' units.
     Returns:
         (...,) integer tensor in [0, horizon].
+
+    Raises:
+        ValueError: d_max <= d_min, horizon < 1, or a NaN/inf distance.
     """
     if not d_max > d_min:
         raise ValueError(f"Need d_max > d_min, got d_min={d_min}, d_max={d_max}.")
@@ -57,6 +62,9 @@ def plan_keypoint_trajectory(
         delay: (B,) or scalar df, frames during which the keypoints stay still.
     Returns:
         (B, L, K, D) trajectory; frame 0 equals `keypoints`.
+
+    Raises:
+        ValueError: keypoints not (B, K, D), a recovery vector of another shape, or NaN/inf.
     """
     check_trailing_shape(keypoints, (None, None), "keypoints")
     if keypoints.ndim != 3:
@@ -65,14 +73,17 @@ def plan_keypoint_trajectory(
     vec = recovery_vector if recovery_vector.ndim == 3 else recovery_vector.unsqueeze(1)
     if vec.shape not in ((b, 1, d), (b, k, d)):
         raise ValueError(
-            f"recovery_vector has shape {tuple(recovery_vector.shape)}, expected ({b}, {d}) or ({b}, {k}, {d})."
+            f"recovery_vector has shape {tuple(recovery_vector.shape)}, expected ({b}, {d}) or ({b}, {k}, "
+            f"{d})."
         )
     check_finite(keypoints, "keypoints")
     check_finite(vec, "recovery_vector")
     t = torch.arange(horizon, device=keypoints.device, dtype=keypoints.dtype)
     delay_t = torch.as_tensor(delay, device=keypoints.device, dtype=keypoints.dtype).reshape(-1, 1)
     n_moves = torch.clamp(t.unsqueeze(0) - delay_t, min=0.0)  # (B or 1, L)
-    return keypoints.unsqueeze(1) + (n_moves[..., None, None] * step_size) * vec.to(keypoints.dtype).unsqueeze(1)
+    return keypoints.unsqueeze(1) + (n_moves[..., None, None] * step_size) * vec.to(
+        keypoints.dtype
+    ).unsqueeze(1)
 
 
 @dataclass
@@ -102,7 +113,9 @@ class RecoveryPlanner:
         if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:
             raise ValueError(f"fixed_delay must be in [0, horizon={self.horizon}), got {self.fixed_delay}.")
 
-    def __call__(self, keypoints: torch.Tensor, recovery_vector: torch.Tensor, distance: torch.Tensor) -> torch.Tensor:
+    def __call__(
+        self, keypoints: torch.Tensor, recovery_vector: torch.Tensor, distance: torch.Tensor
+    ) -> torch.Tensor:
         """(B, K, D) world keypoints, (B, D) or (B, K, D) recovery vectors, (B,) end-effector-to-object
         distances -> (B, L, K, D) keypoint plan whose frame 0 is `keypoints`."""
         vec = recovery_vector
@@ -112,5 +125,7 @@ class RecoveryPlanner:
         if self.fixed_delay is None:
             delay = recovery_delay(distance, self.d_min, self.d_max, self.horizon)
         else:
-            delay = torch.full((keypoints.shape[0],), self.fixed_delay, dtype=torch.long, device=keypoints.device)
+            delay = torch.full(
+                (keypoints.shape[0],), self.fixed_delay, dtype=torch.long, device=keypoints.device
+            )
         return plan_keypoint_trajectory(keypoints, vec, self.step_size, self.horizon, delay)

@@ -79,11 +79,23 @@ def plot_density_field(
     score = field["score"]
     lo = np.quantile(score, 0.05)
     im = ax.imshow(
-        np.clip(score, lo, None), origin="lower", extent=extent, cmap="viridis", aspect="equal", interpolation="bilinear"
+        np.clip(score, lo, None),
+        origin="lower",
+        extent=extent,
+        cmap="viridis",
+        aspect="equal",
+        interpolation="bilinear",
     )
     fig.colorbar(im, ax=ax, label=f"OOD score ({manifold.score_type}, clipped)")
     if manifold.is_calibrated:
-        ax.contour(field["xs"], field["ys"], score, levels=[float(manifold.threshold_)], colors="white", linewidths=1.5)
+        ax.contour(
+            field["xs"],
+            field["ys"],
+            score,
+            levels=[float(manifold.threshold_)],
+            colors="white",
+            linewidths=1.5,
+        )
     if training_keypoints is not None:
         pts = training_keypoints.reshape(-1, training_keypoints.shape[-1])
         idx = np.random.default_rng(0).choice(len(pts), size=min(len(pts), 3000), replace=False)
@@ -95,16 +107,25 @@ def plot_density_field(
     unit = np.where(norm > 0, vec / np.maximum(norm, 1e-12), 0.0)
     gx, gy = np.meshgrid(field["xs"][sl[1]], field["ys"][sl[0]])
     ood = field["is_ood"][sl]
-    ax.quiver(gx[ood], gy[ood], unit[..., 0][ood], unit[..., 1][ood], color="orangered", scale=30, width=0.004)
+    ax.quiver(
+        gx[ood], gy[ood], unit[..., 0][ood], unit[..., 1][ood], color="orangered", scale=30, width=0.004
+    )
     for (name, (x0, x1, y0, y1)), color in zip((regions or {}).items(), ("deepskyblue", "magenta", "yellow")):
-        ax.add_patch(plt.Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, edgecolor=color, linewidth=1.5, label=name))
+        ax.add_patch(
+            plt.Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, edgecolor=color, linewidth=1.5, label=name)
+        )
     if regions:
         ax.legend(loc="upper right", fontsize=8)
     ax.set_xlim(extent[0], extent[1])
     ax.set_ylim(extent[2], extent[3])
     ax.set_xlabel("object x")
     ax.set_ylabel("object y")
-    ax.set_title(title or f"OOD score and recovery direction\n(object translated at angle {angle:.2f} rad; white: threshold)", fontsize=10)
+    ax.set_title(
+        title
+        or "OOD score and recovery direction\n"
+        f"(object translated at angle {angle:.2f} rad; white: threshold)",
+        fontsize=10,
+    )
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
@@ -113,8 +134,14 @@ def plot_density_field(
     return path
 
 
-def video_frame_strip(video: str | Path, path: str | Path, n_frames: int = 6, title: str | None = None) -> Path:
-    """Save a PNG of `n_frames` evenly spaced frames (first and last included) of a video, in one row."""
+def video_frame_strip(
+    video: str | Path, path: str | Path, n_frames: int = 6, title: str | None = None
+) -> Path:
+    """Save a PNG of `n_frames` evenly spaced frames (first and last included) of a video, in one row.
+
+    Raises:
+        ValueError: a video without frames.
+    """
     import av
     import matplotlib
 

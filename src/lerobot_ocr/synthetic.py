@@ -12,6 +12,7 @@ from lerobot_ocr.constants import PUSHT_GOAL_POSE
 from lerobot_ocr.geometry import pose_to_matrix
 from lerobot_ocr.keypoints import PUSHT_T_KEYPOINTS, pose_to_keypoints
 
+
 def synthetic_pusht_poses(
     n_episodes: int = 50,
     steps: int = 60,
@@ -25,7 +26,11 @@ def synthetic_pusht_poses(
     """
     rng = np.random.default_rng(seed)
     starts = np.stack(
-        [rng.uniform(*x_range, n_episodes), rng.uniform(*y_range, n_episodes), rng.uniform(-np.pi, np.pi, n_episodes)],
+        [
+            rng.uniform(*x_range, n_episodes),
+            rng.uniform(*y_range, n_episodes),
+            rng.uniform(-np.pi, np.pi, n_episodes),
+        ],
         axis=-1,
     )
     s = np.linspace(0.0, 1.0, steps)

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lerobot_ocr.constants import PUSHT_TASK as TASK
 from lerobot_ocr.datagen.recording import (
     build_dataset,
     collect_episodes,
@@ -23,7 +24,6 @@ from lerobot_ocr.datagen.recording import (
     finish,
     work_dir,
 )
-from lerobot_ocr.constants import PUSHT_TASK as TASK
 from lerobot_ocr.experts.rollout import rollout
 
 FPS = 10
@@ -98,9 +98,16 @@ def generate_pusht(
     env = make_pusht_ocr_env(**{k: v for k, v in env_cfg.gym_kwargs.items() if k != "max_episode_steps"})
     expert = PushTExpert(seed=seed)
     paths = collect_episodes(
-        work, {"region": region, "seed": seed, **options}, episodes, seed, lambda s: record_episode(env, expert, s),
-        desc=f"Push-T expert demos ({region})", max_attempts=max_attempts,
-    )  # fmt: skip
+        work,
+        {"region": region, "seed": seed, **options},
+        episodes,
+        seed,
+        lambda s: record_episode(env, expert, s),
+        desc=f"Push-T expert demos ({region})",
+        max_attempts=max_attempts,
+    )
     env.close()
-    ds = build_dataset(paths, root, repo_id, FPS, pusht_features(use_videos), "2d pointer", use_videos, _frames)
+    ds = build_dataset(
+        paths, root, repo_id, FPS, pusht_features(use_videos), "2d pointer", use_videos, _frames
+    )
     return finish(ds, work, push_to_hub, private, keep_work)

@@ -22,6 +22,11 @@ from lerobot_ocr.files import atomic_write
 
 
 def work_dir(root: Path) -> Path:
+    """The per-episode cache `<root>.work/` of a generator that writes the dataset `root` (created here).
+
+    Raises:
+        FileExistsError: `root` exists and is not a LeRobotDataset.
+    """
     if root.exists() and not (root / "meta" / "info.json").exists():
         raise FileExistsError(f"{root} exists and is not a LeRobotDataset; choose another --root.")
     work = root.with_name(root.name + ".work")
@@ -38,7 +43,9 @@ def env_settings(options: dict | None) -> dict:
     options = json.loads(json.dumps(options or {}))
     for key in ("region", "obs_type"):
         if key in options:
-            raise ValueError(f"env option {key!r} is set by the generator (use --region / --no-images), not --env.{key}.")
+            raise ValueError(
+                f"env option {key!r} is set by the generator (use --region / --no-images), not --env.{key}."
+            )
     return options
 
 
@@ -56,13 +63,18 @@ def collect_episodes(
     desc: str,
     max_attempts: int | None = None,
 ) -> list[Path]:
-    """Cache `episodes` successful episodes in `work`; `record(env_seed)` returns arrays or None (failed)."""
+    """Cache `episodes` successful episodes in `work`; `record(env_seed)` returns arrays or None (failed).
+
+    Raises:
+        ValueError: `work` holds episodes made with other `params`.
+        RuntimeError: too few successes within `max_attempts`.
+    """
     ledger_path = work / "ledger.json"
     ledger = json.loads(ledger_path.read_text()) if ledger_path.exists() else {"tried": {}}
     if ledger.get("params", params) != params:
         raise ValueError(
-            f"{work} holds episodes generated with {ledger['params']}, not {params}. "
-            "Use the same settings to resume, or another --root."
+            f"{work} holds episodes generated with {ledger['params']}, not {params}. Use the same settings "
+            "to resume, or another --root."
         )
     ledger["params"] = params
     done = sorted(work.glob("episode_*.npz"))
@@ -81,7 +93,9 @@ def collect_episodes(
             atomic_write(ledger_path, lambda p: p.write_text(json.dumps(ledger)))
             attempt += 1
     if len(done) < episodes:
-        raise RuntimeError(f"Only {len(done)} successful episodes after {attempt} attempts (asked for {episodes}).")
+        raise RuntimeError(
+            f"Only {len(done)} successful episodes after {attempt} attempts (asked for {episodes})."
+        )
     return sorted(done)[:episodes]
 
 
@@ -130,7 +144,12 @@ def build_dataset(
     if staging.exists():
         shutil.rmtree(staging)
     ds = LeRobotDataset.create(
-        repo_id=repo_id, fps=fps, features=features, root=staging, robot_type=robot_type, use_videos=use_videos
+        repo_id=repo_id,
+        fps=fps,
+        features=features,
+        root=staging,
+        robot_type=robot_type,
+        use_videos=use_videos,
     )
     for path in tqdm(episodes, desc="Writing LeRobotDataset", unit="episode"):
         with np.load(path) as ep:

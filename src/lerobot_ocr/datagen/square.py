@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lerobot_ocr.constants import SQUARE_TASK as TASK
 from lerobot_ocr.datagen.recording import (
     build_dataset,
     collect_episodes,
@@ -24,7 +25,6 @@ from lerobot_ocr.datagen.recording import (
     finish,
     work_dir,
 )
-from lerobot_ocr.constants import SQUARE_TASK as TASK
 from lerobot_ocr.experts.rollout import rollout
 
 FPS = 20
@@ -34,11 +34,21 @@ CAMERAS = ("agentview", "wrist")
 
 def square_features(images: bool = False, use_videos: bool = True, size: int = 84) -> dict:
     features = {
-        "observation.state": {"dtype": "float32", "shape": (11,), "names": ["x", "y", "z", *ROT6D, "finger_l", "finger_r"]},
+        "observation.state": {
+            "dtype": "float32",
+            "shape": (11,),
+            "names": ["x", "y", "z", *ROT6D, "finger_l", "finger_r"],
+        },
         "observation.environment_state": {
-            "dtype": "float32", "shape": (12,), "names": ["nut_x", "nut_y", "nut_z", *ROT6D, "eef_dx", "eef_dy", "eef_dz"],
-        },  # fmt: skip
-        "observation.object_pose": {"dtype": "float32", "shape": (7,), "names": ["x", "y", "z", "qw", "qx", "qy", "qz"]},
+            "dtype": "float32",
+            "shape": (12,),
+            "names": ["nut_x", "nut_y", "nut_z", *ROT6D, "eef_dx", "eef_dy", "eef_dz"],
+        },
+        "observation.object_pose": {
+            "dtype": "float32",
+            "shape": (7,),
+            "names": ["x", "y", "z", "qw", "qx", "qy", "qz"],
+        },
         "action": {"dtype": "float32", "shape": (10,), "names": ["x", "y", "z", *ROT6D, "gripper"]},
         "next.reward": {"dtype": "float32", "shape": (1,), "names": None},
         "next.success": {"dtype": "bool", "shape": (1,), "names": None},
@@ -47,8 +57,10 @@ def square_features(images: bool = False, use_videos: bool = True, size: int = 8
     if images:
         for cam in CAMERAS:
             features[f"observation.images.{cam}"] = {
-                "dtype": "video" if use_videos else "image", "shape": (size, size, 3), "names": ["height", "width", "channels"],
-            }  # fmt: skip
+                "dtype": "video" if use_videos else "image",
+                "shape": (size, size, 3),
+                "names": ["height", "width", "channels"],
+            }
     return features
 
 
@@ -101,9 +113,14 @@ def generate_square(
     env = make_square_ocr_env(obs_type=obs_type, region=region, regions=env_cfg.nut_regions, render_mode=None)
     expert = SquareExpert(seed=seed)
     paths = collect_episodes(
-        work, {"region": region, "seed": seed, "images": images, **options}, episodes, seed,
-        lambda s: record_episode(env, expert, s), desc=f"Square expert demos ({region})", max_attempts=max_attempts,
-    )  # fmt: skip
+        work,
+        {"region": region, "seed": seed, "images": images, **options},
+        episodes,
+        seed,
+        lambda s: record_episode(env, expert, s),
+        desc=f"Square expert demos ({region})",
+        max_attempts=max_attempts,
+    )
     env.close()
     features = square_features(images, use_videos)
     ds = build_dataset(paths, root, repo_id, FPS, features, "panda", use_videos and images, _frames)

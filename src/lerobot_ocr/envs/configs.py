@@ -81,7 +81,8 @@ class PushtOcrEnvConfig(EnvConfig):
             self.features["environment_state"] = PolicyFeature(type=FeatureType.ENV, shape=(16,))
         else:
             raise ValueError(
-                f"--env.obs_type must be 'pixels_agent_pos' or 'environment_state_agent_pos', got {self.obs_type!r}."
+                "--env.obs_type must be 'pixels_agent_pos' or 'environment_state_agent_pos', got "
+                f"{self.obs_type!r}."
             )
 
     @property
@@ -101,8 +102,12 @@ class PushtOcrEnvConfig(EnvConfig):
             "max_episode_steps": self.episode_length,
         }
 
-    def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
-        return {self.type: {0: _vector_env(partial(_make_pusht_ocr, self.gym_kwargs), n_envs, use_async_envs)}}
+    def create_envs(
+        self, n_envs: int, use_async_envs: bool = False
+    ) -> dict[str, dict[int, gym.vector.VectorEnv]]:
+        return {
+            self.type: {0: _vector_env(partial(_make_pusht_ocr, self.gym_kwargs), n_envs, use_async_envs)}
+        }
 
 
 def _make_square_ocr(kwargs: dict):
@@ -117,7 +122,7 @@ def _make_square_ocr(kwargs: dict):
 @EnvConfig.register_subclass("square_ocr")
 @dataclass
 class SquareOcrEnvConfig(EnvConfig):
-    """Robomimic-style Square (robosuite, Panda) with ID/OOD nut starts: `--env.type=square_ocr --env.region=ood`.
+    """Robomimic-style Square (robosuite, Panda), ID/OOD nut starts: `--env.type=square_ocr --env.region=ood`.
 
     Needs `pip install 'lerobot_policy_ocr[square]'` (robosuite, mujoco < 4; images: MUJOCO_GL=egl).
     region: "id" (robosuite's default nut box, x in [-0.115, -0.11], y in [0.11, 0.225], any yaw),
@@ -161,14 +166,17 @@ class SquareOcrEnvConfig(EnvConfig):
         if self.region not in REGIONS:
             raise ValueError(f"--env.region must be one of {REGIONS}, got {self.region!r}.")
         if self.obs_type == "pixels_agent_pos":
-            image = PolicyFeature(type=FeatureType.VISUAL, shape=(self.observation_size, self.observation_size, 3))
+            image = PolicyFeature(
+                type=FeatureType.VISUAL, shape=(self.observation_size, self.observation_size, 3)
+            )
             self.features["pixels/agentview"] = image
             self.features["pixels/wrist"] = image
         elif self.obs_type == "environment_state_agent_pos":
             self.features["environment_state"] = PolicyFeature(type=FeatureType.ENV, shape=(12,))
         else:
             raise ValueError(
-                f"--env.obs_type must be 'pixels_agent_pos' or 'environment_state_agent_pos', got {self.obs_type!r}."
+                "--env.obs_type must be 'pixels_agent_pos' or 'environment_state_agent_pos', got "
+                f"{self.obs_type!r}."
             )
 
     @property
@@ -188,5 +196,9 @@ class SquareOcrEnvConfig(EnvConfig):
             "max_episode_steps": self.episode_length,
         }
 
-    def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
-        return {self.type: {0: _vector_env(partial(_make_square_ocr, self.gym_kwargs), n_envs, use_async_envs)}}
+    def create_envs(
+        self, n_envs: int, use_async_envs: bool = False
+    ) -> dict[str, dict[int, gym.vector.VectorEnv]]:
+        return {
+            self.type: {0: _vector_env(partial(_make_square_ocr, self.gym_kwargs), n_envs, use_async_envs)}
+        }

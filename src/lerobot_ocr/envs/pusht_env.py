@@ -59,10 +59,15 @@ class PushTOcrEnv(PushTEnv):
             visualization_height=visualization_height,
         )
         self.region = region
-        self.classify = load_region_fn(region_fn) if region_fn else AxisSplit(region_axis, region_threshold, id_side)
+        self.classify = (
+            load_region_fn(region_fn) if region_fn else AxisSplit(region_axis, region_threshold, id_side)
+        )
         self.max_reset_tries = max_reset_tries
         self.observation_space = spaces.Dict(
-            {**self.observation_space.spaces, "object_pose": spaces.Box(-np.inf, np.inf, (3,), dtype=np.float64)}
+            {
+                **self.observation_space.spaces,
+                "object_pose": spaces.Box(-np.inf, np.inf, (3,), dtype=np.float64),
+            }
         )
 
     # lerobot-eval probes both (a missing one kills AsyncVectorEnv workers) and passes the text as `task`.
@@ -85,6 +90,11 @@ class PushTOcrEnv(PushTEnv):
         return self.classify(pose, block_keypoints(pose))
 
     def reset(self, seed=None, options=None):
+        """Gym reset: a seed gives one start in the env's region; `options["reset_to_state"]` bypasses it.
+
+        Raises:
+            RuntimeError: no start of the requested region within `max_reset_tries` draws.
+        """
         if options is not None and options.get("reset_to_state") is not None:
             obs, info = super().reset(seed=seed, options=options)
             info["start_region"] = self.start_region()

@@ -1,4 +1,4 @@
-"""In-distribution / out-of-distribution start regions: Push-T's split of the T's keypoints, Square's nut boxes.
+"""In-distribution / out-of-distribution start regions: Push-T's split of the T, Square's nut boxes.
 
 The paper's Push-T split: ID = every T keypoint has x <= 256 (left half), OOD = every keypoint has
 x >= 256; starts that straddle the line belong to neither. A user can move the line (axis,
@@ -44,7 +44,7 @@ class AxisSplit:
 
 
 def load_region_fn(path: str) -> Callable[[np.ndarray, np.ndarray], str]:
-    """Import a user predicate "package.module:function" with signature fn(pose, keypoints) -> "id" | "ood" | other.
+    """Import a user predicate "package.module:function": fn(pose, keypoints) -> "id" | "ood" | other.
 
     Raises:
         ValueError: the path is malformed, cannot be imported, or is not callable.
@@ -53,7 +53,11 @@ def load_region_fn(path: str) -> Callable[[np.ndarray, np.ndarray], str]:
 
 
 def accepts(region: str, label: str) -> bool:
-    """Whether a start labelled `label` ("id"/"ood"/"neither") belongs to the requested `region`."""
+    """Whether a start labelled `label` ("id"/"ood"/"neither") belongs to the requested `region`.
+
+    Raises:
+        ValueError: an unknown region.
+    """
     if region not in REGIONS:
         raise ValueError(f"Unknown region {region!r}; use one of {REGIONS}.")
     return region == "all" or label == region
@@ -69,7 +73,11 @@ class NutStartRegions:
     ood_dy: tuple[float, float] = (-0.35, -0.20)
 
     def sample(self, rng: np.random.Generator, region: str) -> tuple[np.ndarray, str]:
-        """One nut start: ((x, y, yaw), label) with label "id" or "ood"."""
+        """One nut start: ((x, y, yaw), label) with label "id" or "ood".
+
+        Raises:
+            ValueError: an unknown region.
+        """
         if region not in REGIONS:
             raise ValueError(f"region must be one of {REGIONS}, got {region!r}.")
         label = region if region != "all" else ("id" if rng.random() < 0.5 else "ood")
@@ -79,7 +87,9 @@ class NutStartRegions:
         return np.array([x, y, yaw]), label
 
     def classify(self, xy: np.ndarray, tol: float = 1e-6) -> str:
-        """"id" if a nut (x, y) lies in the ID box, else "ood"."""
+        """ "id" if a nut (x, y) lies in the ID box, else "ood"."""
         x, y = float(xy[0]), float(xy[1])
-        inside = self.id_x[0] - tol <= x <= self.id_x[1] + tol and self.id_y[0] - tol <= y <= self.id_y[1] + tol
+        inside = (
+            self.id_x[0] - tol <= x <= self.id_x[1] + tol and self.id_y[0] - tol <= y <= self.id_y[1] + tol
+        )
         return "id" if inside else "ood"

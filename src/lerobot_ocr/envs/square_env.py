@@ -12,7 +12,7 @@ World frame = robosuite's (metres; table top at z = 0.82, square peg at (0.23, 0
   the frame the controller moves); "environment_state" (12,) = [nut xyz, nut rot6d, nut -> eef xyz]
   (low-dim base policies, as robomimic's `object` obs); "object_pose" (7,) = nut [x, y, z, qw, qx,
   qy, qz]; with obs_type "pixels_agent_pos" also "pixels" {"agentview", "wrist"} (H, W, 3) uint8.
-- Regions (OCR_REFERENCE_CODE_FACTS.md §7): "id" = robosuite's default nut placement (x in
+- Regions (the reference code's Square OOD protocol): "id" = robosuite's default nut placement (x in
   [-0.115, -0.11], y in [0.11, 0.225], any yaw); "ood" = an ID start shifted by dx ~ U(-0.01, 0.01),
   dy ~ U(-0.35, -0.20) (the nut on the other side of the table); "all" = either, 50/50.
 - Success = robosuite's check (nut around the peg, gripper away from it); reward = success (0/1).
@@ -33,13 +33,18 @@ from lerobot_ocr.geometry.rotations import (
     rotation_6d_to_matrix,
 )
 
+
 def pose_to_action(pos: np.ndarray, rotation: np.ndarray, gripper: float) -> np.ndarray:
     """World eef position (3,), rotation matrix (3, 3) and gripper command -> action (10,)."""
     return np.concatenate([pos, matrix_to_rotation_6d(rotation), [gripper]]).astype(np.float32)
 
 
 def action_to_robosuite(action: np.ndarray) -> np.ndarray:
-    """Action (10,) [xyz, rot6d, gripper] -> robosuite OSC absolute action (7,) [xyz, axis angle, gripper]."""
+    """Action (10,) [xyz, rot6d, gripper] -> robosuite OSC absolute action (7,) [xyz, axis angle, gripper].
+
+    Raises:
+        ValueError: an action of the wrong shape, or NaN/inf.
+    """
     action = np.asarray(action, dtype=np.float64)
     if action.shape != (10,):
         raise ValueError(f"square_ocr actions are (10,) [xyz, rot6d, gripper]; got shape {action.shape}.")
@@ -180,10 +185,14 @@ class SquareOcrEnv(gym.Env):
     def _observation(self) -> dict:
         eef_pos, eef_rot = self.eef_pose()
         nut = self.nut_pose_matrix()
-        gripper = np.array(self.sim_env.sim.data.qpos[self.sim_env.robots[0]._ref_gripper_joint_pos_indexes["right"]])
+        gripper = np.array(
+            self.sim_env.sim.data.qpos[self.sim_env.robots[0]._ref_gripper_joint_pos_indexes["right"]]
+        )
         obs = {
             "agent_pos": np.concatenate([eef_pos, matrix_to_rotation_6d(eef_rot), gripper]),
-            "environment_state": np.concatenate([nut[:3, 3], matrix_to_rotation_6d(nut[:3, :3]), eef_pos - nut[:3, 3]]),
+            "environment_state": np.concatenate(
+                [nut[:3, 3], matrix_to_rotation_6d(nut[:3, :3]), eef_pos - nut[:3, 3]]
+            ),
             "object_pose": self.object_pose(),
         }
         if self._pixels:
@@ -221,6 +230,11 @@ class SquareOcrEnv(gym.Env):
         return self._observation(), {"start_region": label, "is_success": False}
 
     def step(self, action):
+        """One absolute end-effector action (10,) -> (observation, reward, terminated, truncated, info).
+
+        Raises:
+            RuntimeError: called before `reset`.
+        """
         if self._sim_env is None:
             raise RuntimeError("Call reset() before step().")
         self.sim_env.step(action_to_robosuite(action))

@@ -45,7 +45,9 @@ def _rot(theta: float) -> np.ndarray:
 
 def pose_error(block_pose: np.ndarray) -> float:
     """Mean distance (px) between the T's keypoints at `block_pose` and at the goal."""
-    return float(np.linalg.norm(block_keypoints(block_pose) - block_keypoints(PUSHT_GOAL_POSE), axis=-1).mean())
+    return float(
+        np.linalg.norm(block_keypoints(block_pose) - block_keypoints(PUSHT_GOAL_POSE), axis=-1).mean()
+    )
 
 
 def distance_to_t(block_pose: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -130,7 +132,9 @@ class PushTExpert:
         return np.array([*env.block.position, env.block.angle])
 
     # ---------------------------------------------------------------------------- planning
-    def _push_targets(self, start: np.ndarray, normal: np.ndarray, length: float, speed: float) -> list[np.ndarray]:
+    def _push_targets(
+        self, start: np.ndarray, normal: np.ndarray, length: float, speed: float
+    ) -> list[np.ndarray]:
         n = max(1, int(np.ceil(length / speed)))
         return [start + normal * length * (i + 1) / n for i in range(n)] + [start + normal * length] * 2
 
@@ -188,9 +192,17 @@ class PushTExpert:
         c = cfg.clearance + 3.0
         rot = _rot(pose[2])
         corners_local = np.array(
-            [[-60 - c, -c], [60 + c, -c], [-60 - c, 30 + c], [60 + c, 30 + c],
-             [-15 - c, 30 + c], [15 + c, 30 + c], [-15 - c, 120 + c], [15 + c, 120 + c]]
-        )  # fmt: skip
+            [
+                [-60 - c, -c],
+                [60 + c, -c],
+                [-60 - c, 30 + c],
+                [60 + c, 30 + c],
+                [-15 - c, 30 + c],
+                [15 + c, 30 + c],
+                [-15 - c, 120 + c],
+                [15 + c, 120 + c],
+            ]
+        )
         corners = pose[:2] + corners_local @ rot.T
         start = self._retreat_point(pose, agent)
         nodes = [start, pre] + [w for w in corners if 15 <= w[0] <= 497 and 15 <= w[1] <= 497]
@@ -234,7 +246,10 @@ class PushTExpert:
             return agent
         eps = 0.5
         grad = np.array(
-            [distance_to_t(pose, (agent + e)[None])[0] - distance_to_t(pose, (agent - e)[None])[0] for e in np.eye(2) * eps]
+            [
+                distance_to_t(pose, (agent + e)[None])[0] - distance_to_t(pose, (agent - e)[None])[0]
+                for e in np.eye(2) * eps
+            ]
         )
         norm = np.linalg.norm(grad)
         away = grad / norm if norm > 1e-9 else (agent - (pose[:2] + _rot(pose[2]) @ COM_LOCAL))

@@ -5,7 +5,9 @@ from __future__ import annotations
 from collections.abc import Callable
 
 
-def rollout(env, expert, seed: int, max_steps: int, record: Callable[[dict, object], dict] | None = None) -> dict:
+def rollout(
+    env, expert, seed: int, max_steps: int, record: Callable[[dict, object], dict] | None = None
+) -> dict:
     """Roll `expert` out on a (wrapped) env from `seed` until success, truncation or `max_steps`.
 
     The expert is reset after the env (`expert.reset(unwrapped_env)`) and asked for each action with

@@ -24,7 +24,9 @@ class SquareExpertConfig:
     turn: float = 0.08  # rad per step
     hover: float = 0.08  # m above the handle before descending
     grasp_depth: float = 0.0  # grip-site height relative to the handle site when closing
-    carry_z: float = 1.06  # eef height while carrying (peg top 0.95; the nut hangs below the grasp and swings)
+    carry_z: float = (
+        1.06  # eef height while carrying (peg top 0.95; the nut hangs below the grasp and swings)
+    )
     release_nut_z: float = 0.88  # nut height at which the gripper opens over the peg
     close_steps: int = 10
     open_steps: int = 8
@@ -102,7 +104,9 @@ class SquareExpert:
         """Step the target toward the goal; True once the target sits on it."""
         step = goal_pos - self.target_pos
         dist = np.linalg.norm(step)
-        self.target_pos = goal_pos.copy() if dist <= self.cfg.speed else self.target_pos + step * self.cfg.speed / dist
+        self.target_pos = (
+            goal_pos.copy() if dist <= self.cfg.speed else self.target_pos + step * self.cfg.speed / dist
+        )
         done = dist <= self.cfg.speed
         if goal_rot is not None:
             err = matrix_to_axis_angle(goal_rot @ self.target_rot.T)
@@ -114,7 +118,7 @@ class SquareExpert:
         return done
 
     def _stalled(self, z: float) -> bool:
-        """True once a height (the eef's or the nut's) has not gone down for 10 calls: resting on something."""
+        """True once a height (the eef's or the nut's) has not gone down for 10 calls: resting."""
         self._z_history = (self._z_history + [z])[-10:]
         return len(self._z_history) == 10 and self._z_history[0] - self._z_history[-1] < 0.001
 
@@ -133,7 +137,11 @@ class SquareExpert:
             if self._move(goal, self._grasp_rotation(env)) and self._reached(env):
                 self.phase = "descend"
         elif phase == "descend":
-            goal = handle + np.array([0.0, 0.0, cfg.grasp_depth + abs(self.noise[1, 2]) * 0.25]) + self.noise[1] * [0.5, 0.5, 0]
+            goal = (
+                handle
+                + np.array([0.0, 0.0, cfg.grasp_depth + abs(self.noise[1, 2]) * 0.25])
+                + self.noise[1] * [0.5, 0.5, 0]
+            )
             eef_z = env.eef_pose()[0][2]
             if self._move(goal, self._grasp_rotation(env)) and (self._reached(env) or self._stalled(eef_z)):
                 self.phase, self.counter, self._z_history = "close", 0, []
@@ -145,7 +153,10 @@ class SquareExpert:
         elif phase == "lift":
             goal = np.array([*self.target_pos[:2], cfg.carry_z]) + self.noise[2] * [0, 0, 1]
             done = self._move(goal)
-            if env.nut_pose_matrix()[2, 3] - self.lift_start_nut_z < 0.02 and self.target_pos[2] > handle[2] + 0.06:
+            if (
+                env.nut_pose_matrix()[2, 3] - self.lift_start_nut_z < 0.02
+                and self.target_pos[2] > handle[2] + 0.06
+            ):
                 self.phase, self.counter = "regrasp", 0  # the nut stayed on the table
             elif done and env.eef_pose()[0][2] > cfg.carry_z - 0.04:
                 # square peg, square hole: turn the nut's yaw onto the peg's (mod 90 deg)
@@ -195,6 +206,8 @@ class SquareExpert:
         return pose_to_action(self.target_pos, self.target_rot, self.gripper)
 
 
-def run_square_expert_episode(env, seed: int, expert: SquareExpert | None = None, max_steps: int = 400) -> dict:
+def run_square_expert_episode(
+    env, seed: int, expert: SquareExpert | None = None, max_steps: int = 400
+) -> dict:
     """Roll the expert out on a (wrapped) Square env from `seed` (`lerobot_ocr.experts.rollout`)."""
     return rollout(env, expert or SquareExpert(seed=seed), seed, max_steps)

@@ -20,7 +20,11 @@ POSE_SIZES: dict[str, int] = {"angle": 3, "quat_wxyz": 7, "quat_xyzw": 7, "axis_
 
 
 def pose_size(rotation: str) -> int:
-    """Length of a pose vector in the given representation."""
+    """Length of a pose vector in the given representation.
+
+    Raises:
+        ValueError: an unknown representation.
+    """
     if rotation not in POSE_SIZES:
         raise ValueError(f"Unknown pose representation {rotation!r}; use one of {sorted(POSE_SIZES)}.")
     return POSE_SIZES[rotation]

@@ -16,7 +16,8 @@ from lerobot_ocr.validation import check_finite, check_trailing_shape
 def _dim(transform: torch.Tensor) -> int:
     if transform.ndim < 2 or transform.shape[-1] != transform.shape[-2] or transform.shape[-1] not in (3, 4):
         raise ValueError(
-            f"transform has shape {tuple(transform.shape)}, expected (..., 3, 3) for SE(2) or (..., 4, 4) for SE(3)."
+            f"transform has shape {tuple(transform.shape)}, expected (..., 3, 3) for SE(2) or (..., 4, 4) "
+            "for SE(3)."
         )
     return transform.shape[-1] - 1
 
@@ -52,7 +53,11 @@ def translation_part(transform: torch.Tensor) -> torch.Tensor:
 
 @numpy_compatible
 def compose(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """a ∘ b (apply b first, then a). Shapes broadcast: (..., d+1, d+1)."""
+    """a ∘ b (apply b first, then a). Shapes broadcast: (..., d+1, d+1).
+
+    Raises:
+        ValueError: shapes that do not compose.
+    """
     if _dim(a) != _dim(b):
         raise ValueError(f"Cannot compose transforms of shapes {tuple(a.shape)} and {tuple(b.shape)}.")
     return a @ b
@@ -80,7 +85,9 @@ def transform_points(transform: torch.Tensor, points: torch.Tensor) -> torch.Ten
     Batch dimensions broadcast, so one transform can map many point sets and vice versa.
     """
     d = _dim(transform)
-    check_trailing_shape(points, (None, d), "points", f"Points must have d={d} coordinates for this transform.")
+    check_trailing_shape(
+        points, (None, d), "points", f"Points must have d={d} coordinates for this transform."
+    )
     rot = transform[..., :d, :d]
     trans = transform[..., None, :d, d]
     return points @ rot.transpose(-1, -2) + trans
@@ -106,6 +113,9 @@ def fit_rigid_transform(
         weights: optional (..., N) non-negative point weights.
     Returns:
         (..., d+1, d+1) proper rigid transform (det R = +1, reflections are corrected).
+
+    Raises:
+        ValueError: points that are not 2D/3D, or fewer than D of them.
     """
     d = source.shape[-1]
     if d not in (2, 3):

@@ -33,10 +33,16 @@ def quaternion_to_matrix(quat: torch.Tensor, convention: str = "wxyz") -> torch.
     q = quat / torch.linalg.vector_norm(quat, dim=-1, keepdim=True)
     w, x, y, z = q.unbind(-1)
     rows = (
-        1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
-        2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
-        2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y),
-    )  # fmt: skip
+        1 - 2 * (y * y + z * z),
+        2 * (x * y - z * w),
+        2 * (x * z + y * w),
+        2 * (x * y + z * w),
+        1 - 2 * (x * x + z * z),
+        2 * (y * z - x * w),
+        2 * (x * z - y * w),
+        2 * (y * z + x * w),
+        1 - 2 * (x * x + y * y),
+    )
     return torch.stack(rows, dim=-1).reshape(*q.shape[:-1], 3, 3)
 
 
@@ -56,10 +62,22 @@ def matrix_to_quaternion(matrix: torch.Tensor, convention: str = "wxyz") -> torc
     )
     root = torch.sqrt(torch.clamp(sq, min=0.0))  # 2 * |q_i|
     # Candidate quaternions (times 2|q_i|... scaled) computed from each pivot.
-    c_w = torch.stack((sq[..., 0], m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]), -1)
-    c_x = torch.stack((m[..., 2, 1] - m[..., 1, 2], sq[..., 1], m[..., 1, 0] + m[..., 0, 1], m[..., 0, 2] + m[..., 2, 0]), -1)
-    c_y = torch.stack((m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] + m[..., 0, 1], sq[..., 2], m[..., 2, 1] + m[..., 1, 2]), -1)
-    c_z = torch.stack((m[..., 1, 0] - m[..., 0, 1], m[..., 0, 2] + m[..., 2, 0], m[..., 2, 1] + m[..., 1, 2], sq[..., 3]), -1)
+    c_w = torch.stack(
+        (sq[..., 0], m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]),
+        -1,
+    )
+    c_x = torch.stack(
+        (m[..., 2, 1] - m[..., 1, 2], sq[..., 1], m[..., 1, 0] + m[..., 0, 1], m[..., 0, 2] + m[..., 2, 0]),
+        -1,
+    )
+    c_y = torch.stack(
+        (m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] + m[..., 0, 1], sq[..., 2], m[..., 2, 1] + m[..., 1, 2]),
+        -1,
+    )
+    c_z = torch.stack(
+        (m[..., 1, 0] - m[..., 0, 1], m[..., 0, 2] + m[..., 2, 0], m[..., 2, 1] + m[..., 1, 2], sq[..., 3]),
+        -1,
+    )
     cands = torch.stack((c_w, c_x, c_y, c_z), dim=-2)  # (..., 4, 4)
     denom = 2.0 * torch.clamp(root, min=1e-12)
     cands = cands / denom[..., :, None]

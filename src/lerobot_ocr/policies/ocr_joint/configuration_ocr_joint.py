@@ -14,7 +14,6 @@ from lerobot_ocr.manifold import MAGNITUDE_TYPES, SCORE_TYPES
 from lerobot_ocr.object_frame import FrameSpec
 
 
-
 @PreTrainedConfig.register_subclass("ocr_joint")
 @dataclass
 class OcrJointConfig(PreTrainedConfig):
@@ -139,14 +138,18 @@ class OcrJointConfig(PreTrainedConfig):
             raise ValueError(f"--policy.magnitude must be one of {MAGNITUDE_TYPES}, got {self.magnitude!r}.")
         if self.horizon % 2 ** len(self.down_dims):
             raise ValueError(
-                f"--policy.horizon ({self.horizon}) must be a multiple of 2**len(down_dims) = {2 ** len(self.down_dims)}."
+                f"--policy.horizon ({self.horizon}) must be a multiple of 2**len(down_dims) = "
+                f"{2 ** len(self.down_dims)}."
             )
         if not 1 <= self.n_recovery_action_steps <= self.horizon:
             raise ValueError(f"--policy.n_recovery_action_steps must be in [1, horizon={self.horizon}].")
         if not self.d_max > self.d_min:
             raise ValueError(f"Need d_max > d_min, got d_min={self.d_min}, d_max={self.d_max}.")
         if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:
-            raise ValueError(f"--policy.fixed_delay must be in [0, horizon={self.horizon}) or None, got {self.fixed_delay}.")
+            raise ValueError(
+                f"--policy.fixed_delay must be in [0, horizon={self.horizon}) or None, got "
+                f"{self.fixed_delay}."
+            )
 
     @property
     def object_dim(self) -> int:
@@ -154,16 +157,22 @@ class OcrJointConfig(PreTrainedConfig):
         return pose_dim(self.pose_rotation)
 
     def validate_features(self) -> None:
-        """Check that the features say what the config expects (pose feature, state, action)."""
+        """Check that the features say what the config expects (pose feature, state, action).
+
+        Raises:
+            ValueError: a missing pose, state or action feature, or a pose of the wrong size.
+        """
         if self.object_pose_key not in self.input_features:
             raise ValueError(
                 f"The dataset has no object pose feature {self.object_pose_key!r} (it has "
                 f"{sorted(self.input_features)}). Convert it first: `lerobot-ocr convert --repo-id ... "
-                "--object <keypoint spec> --pose-from <source> --output-root ...`, or set --policy.object_pose_key."
+                "--object <keypoint spec> --pose-from <source> --output-root ...`, or set "
+                "--policy.object_pose_key."
             )
         if self.state_key not in self.input_features:
             raise ValueError(
-                f"The keypoint inverse policy needs the robot state {self.state_key!r}; set --policy.state_key."
+                f"The keypoint inverse policy needs the robot state {self.state_key!r}; set "
+                "--policy.state_key."
             )
         if ACTION not in self.output_features:
             raise ValueError("The dataset has no `action` feature.")
@@ -171,7 +180,8 @@ class OcrJointConfig(PreTrainedConfig):
         if size != pose_size(self.pose_rotation):
             raise ValueError(
                 f"{self.object_pose_key} has {size} numbers but pose_rotation={self.pose_rotation!r} needs "
-                f"{pose_size(self.pose_rotation)}. Set --policy.pose_rotation to the feature's representation."
+                f"{pose_size(self.pose_rotation)}. Set --policy.pose_rotation to the feature's "
+                "representation."
             )
 
     def get_optimizer_preset(self) -> AdamConfig:

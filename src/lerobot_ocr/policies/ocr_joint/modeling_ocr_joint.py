@@ -38,8 +38,7 @@ from lerobot_ocr.dataset_columns import episode_last_positions, read_columns, wi
 from lerobot_ocr.geometry import pose_to_matrix
 from lerobot_ocr.inverse_policy import KeypointInversePolicy
 from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
-from lerobot_ocr.manifold import KeypointManifold
-from lerobot_ocr.manifold import RecoveryOutput
+from lerobot_ocr.manifold import KeypointManifold, RecoveryOutput
 from lerobot_ocr.planner import RecoveryPlanner
 from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
 from lerobot_ocr.policies.ocr_joint.switch import SwitchState, advance, decide, needs_check
@@ -91,11 +90,13 @@ class OcrJointPolicy(PreTrainedPolicy):
             local = resolve_keypoints(config.object_keypoints)
         if local.shape[1] != config.object_dim:
             raise ValueError(
-                f"Keypoint spec mismatch: --policy.object_keypoints={config.object_keypoints!r} is {local.shape[1]}D "
-                f"but pose_rotation={config.pose_rotation!r} poses are {config.object_dim}D."
+                f"Keypoint spec mismatch: --policy.object_keypoints={config.object_keypoints!r} is "
+                f"{local.shape[1]}D but pose_rotation={config.pose_rotation!r} poses are "
+                f"{config.object_dim}D."
             )
         self.register_buffer("object_keypoints_", torch.as_tensor(local, dtype=torch.float32))
-        # The threshold calibrated on the training frames, before `threshold_margin` (so it can change at eval).
+        # The threshold calibrated on the training frames, before `threshold_margin` (so it can change at
+        # eval).
         self.register_buffer("calibrated_threshold_", torch.tensor(float("nan"), dtype=torch.float64))
         k, d = local.shape
         state_dim = config.input_features[config.state_key].shape[0]
@@ -108,7 +109,10 @@ class OcrJointPolicy(PreTrainedPolicy):
             dim=d,
         )
         self.inverse = KeypointInversePolicy(
-            k, d, state_dim, action_dim,
+            k,
+            d,
+            state_dim,
+            action_dim,
             horizon=config.horizon,
             state_frame=config.state_frame,
             action_frame=config.action_frame,
@@ -123,11 +127,15 @@ class OcrJointPolicy(PreTrainedPolicy):
             beta_schedule=config.beta_schedule,
             prediction_type=config.prediction_type,
             clip_sample=config.clip_sample,
-        )  # fmt: skip
+        )
         self.planner = RecoveryPlanner(
-            horizon=config.horizon, step_size=config.step_size, d_min=config.d_min, d_max=config.d_max, normalize=True,
+            horizon=config.horizon,
+            step_size=config.step_size,
+            d_min=config.d_min,
+            d_max=config.d_max,
+            normalize=True,
             fixed_delay=config.fixed_delay,
-        )  # fmt: skip
+        )
 
         bundled = Path(bundle_dir) / BASE_DIR if bundle_dir is not None else None
         if bundled is not None and bundled.is_dir():
@@ -136,7 +144,8 @@ class OcrJointPolicy(PreTrainedPolicy):
             base = load_base_policy(config.base_path, config.device, revision=config.base_revision)
         else:
             raise ValueError(
-                "ocr_joint needs a base policy: pass --policy.base_path=<local pretrained_model folder or hub id>."
+                "ocr_joint needs a base policy: pass --policy.base_path=<local pretrained_model folder or "
+                "hub id>."
             )
         self.base = base.policy
         self._base_pre, self._base_post = base.preprocessor, base.postprocessor
@@ -182,13 +191,15 @@ class OcrJointPolicy(PreTrainedPolicy):
             first = int(np.flatnonzero(bad.numpy())[0])
             raise ValueError(
                 f"{int(bad.sum())} frame(s) of {cfg.object_pose_key} are NaN/inf (first: episode "
-                f"{int(cols['episode_index'][first])}, frame {int(cols['frame_index'][first])}). "
-                "Re-run `lerobot-ocr convert` with a pose source that covers every frame, or drop those episodes."
+                f"{int(cols['episode_index'][first])}, frame {int(cols['frame_index'][first])}). Re-run "
+                "`lerobot-ocr convert` with a pose source that covers every frame, or drop those episodes."
             )
         frames = self._pose_matrix(pose)
         kw = {"persistent": False}
         self.register_buffer("_tbl_index", torch.as_tensor(cols["index"], dtype=torch.long), **kw)
-        self.register_buffer("_tbl_last", torch.as_tensor(episode_last_positions(cols["episode_index"])), **kw)
+        self.register_buffer(
+            "_tbl_last", torch.as_tensor(episode_last_positions(cols["episode_index"])), **kw
+        )
         self.register_buffer("_tbl_frames", frames, **kw)
         self.register_buffer("_tbl_keypoints", self._keypoints(frames), **kw)
         self.register_buffer("_tbl_state", torch.as_tensor(cols[cfg.state_key], dtype=torch.float32), **kw)
@@ -220,11 +231,13 @@ class OcrJointPolicy(PreTrainedPolicy):
         self.inverse.fit_normalization(kp, st, act)
         logging.info(
             "ocr_joint: fitted the keypoint manifold on %d frames (threshold %.3f, %s)",
-            n, float(self.manifold.threshold_), cfg.score_type,
-        )  # fmt: skip
+            n,
+            float(self.manifold.threshold_),
+            cfg.score_type,
+        )
 
     def apply_threshold(self) -> float:
-        """Set the switch threshold from the config: `threshold` if given, else calibrated - `threshold_margin`."""
+        """Set the switch threshold: `threshold` if given, else the calibrated one - `threshold_margin`."""
         cfg = self.config
         if cfg.threshold is not None:
             self.manifold.set_threshold(cfg.threshold)
@@ -233,7 +246,12 @@ class OcrJointPolicy(PreTrainedPolicy):
         return float(self.manifold.threshold_)
 
     def forward(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, None]:
-        """Inverse-policy diffusion loss on the windows that start at the batch's frames (`index`)."""
+        """Inverse-policy diffusion loss on the windows that start at the batch's frames (`index`).
+
+        Raises:
+            RuntimeError: built without the training dataset.
+            KeyError: a batch `index` not in it.
+        """
         if not self._has_table:
             raise RuntimeError(
                 "OcrJointPolicy.forward needs the training dataset: build the policy with "
@@ -244,7 +262,9 @@ class OcrJointPolicy(PreTrainedPolicy):
         if not bool((self._tbl_index[pos] == index).all()):
             raise KeyError("Batch frames are not in the dataset the policy was built with (unknown `index`).")
         w = self._windows(pos)
-        loss = self.inverse.compute_loss(w["keypoints"], w["state"], w["frame"], w["actions"], w["action_is_pad"])
+        loss = self.inverse.compute_loss(
+            w["keypoints"], w["state"], w["frame"], w["actions"], w["action_is_pad"]
+        )
         return loss, None
 
     # ------------------------------------------------------------------------------ inference
@@ -277,9 +297,10 @@ class OcrJointPolicy(PreTrainedPolicy):
         cfg = self.config
         if cfg.object_pose_key not in batch:
             raise KeyError(
-                f"The observation has no {cfg.object_pose_key!r} (keys: {sorted(k for k in batch if k.startswith('observation'))}). "
-                "ocr_joint needs the object pose at run time: use an env that exposes it (e.g. --env.type=pusht_ocr), "
-                "a pose-estimator processor, or set --policy.object_pose_key."
+                f"The observation has no {cfg.object_pose_key!r} (keys: "
+                f"{sorted(k for k in batch if k.startswith('observation'))}). ocr_joint needs the object "
+                "pose at run time: use an env that exposes it (e.g. --env.type=pusht_ocr), a "
+                "pose-estimator processor, or set --policy.object_pose_key."
             )
         pose = batch[cfg.object_pose_key].to(torch.float32)
         if pose.ndim == 1:
@@ -287,7 +308,9 @@ class OcrJointPolicy(PreTrainedPolicy):
         frames = self._pose_matrix(pose)  # rejects NaN/inf poses with a clear error
         keypoints = self._keypoints(frames)
         state = batch[cfg.state_key].to(torch.float32).reshape(pose.shape[0], -1)
-        return Observed(frames, keypoints, state, self.manifold.recovery(keypoints.double(), magnitude=cfg.magnitude))
+        return Observed(
+            frames, keypoints, state, self.manifold.recovery(keypoints.double(), magnitude=cfg.magnitude)
+        )
 
     def _distance(self, state: torch.Tensor, keypoints: torch.Tensor) -> torch.Tensor:
         """(B,) distance from the end effector to the nearest object keypoint (0 if unknown)."""
@@ -339,7 +362,9 @@ class OcrJointPolicy(PreTrainedPolicy):
         return action
 
     @torch.no_grad()
-    def select_action(self, batch: dict[str, torch.Tensor], noise: torch.Tensor | None = None) -> torch.Tensor:
+    def select_action(
+        self, batch: dict[str, torch.Tensor], noise: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """One action per row, (B, A) world frame, on the batch's device.
 
         `batch` is the env observation after our preprocessor; `noise` seeds the inverse policy's
@@ -350,7 +375,8 @@ class OcrJointPolicy(PreTrainedPolicy):
         b, device = (1 if state.ndim == 1 else state.shape[0]), state.device
         self._start_rows(b, device)
         obs = self._observe(batch) if needs_check(self._switch, queued_actions(self.base)) else None
-        score = obs.recovery.score.to(device) if obs else torch.full((b,), float("nan"), dtype=torch.float64, device=device)
+        unchecked = torch.full((b,), float("nan"), dtype=torch.float64, device=device)  # decides nothing
+        score = unchecked if obs is None else obs.recovery.score.to(device)
         decision = decide(score, float(self.manifold.threshold_), self._switch)
         if bool(decision.needs_chunk.any()):
             self._plan_chunks(obs, decision.needs_chunk, noise)
@@ -372,7 +398,9 @@ class OcrJointPolicy(PreTrainedPolicy):
         n = min(self.config.n_recovery_action_steps, base_chunk.shape[1])
         out = base_chunk[:, :n].to(obs.frames.device, torch.float32).clone()
         if bool(ood.any()):
-            actions, _ = self.recovery_actions(obs.frames[ood], obs.keypoints[ood], obs.state[ood], obs.recovery.vector[ood])
+            actions, _ = self.recovery_actions(
+                obs.frames[ood], obs.keypoints[ood], obs.state[ood], obs.recovery.vector[ood]
+            )
             out[ood] = actions[:, :n].to(out.dtype)
         return out
 
@@ -396,7 +424,9 @@ class OcrJointPolicy(PreTrainedPolicy):
         }
 
     # ------------------------------------------------------------------------------ save / load
-    def _save_pretrained(self, save_directory: Path, state_dict: dict[str, torch.Tensor] | None = None) -> None:
+    def _save_pretrained(
+        self, save_directory: Path, state_dict: dict[str, torch.Tensor] | None = None
+    ) -> None:
         """config.json + model.safetensors (manifold, inverse policy) + base/ (the base's own folder)."""
         save_directory = Path(save_directory)
         self.config._save_pretrained(save_directory)
@@ -433,10 +463,15 @@ class OcrJointPolicy(PreTrainedPolicy):
 
             path = Path(
                 snapshot_download(
-                    repo_id=str(pretrained_name_or_path), revision=revision, cache_dir=cache_dir,
-                    force_download=force_download, proxies=proxies, token=token, local_files_only=local_files_only,
+                    repo_id=str(pretrained_name_or_path),
+                    revision=revision,
+                    cache_dir=cache_dir,
+                    force_download=force_download,
+                    proxies=proxies,
+                    token=token,
+                    local_files_only=local_files_only,
                 )
-            )  # fmt: skip
+            )
         if config is None:
             config = PreTrainedConfig.from_pretrained(path, **kwargs)
         instance = cls(config, bundle_dir=path, **kwargs)

@@ -19,5 +19,8 @@ from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfi
 
 def make_ocr_joint_pre_post_processors(
     config: OcrJointConfig, dataset_stats: dict[str, dict[str, torch.Tensor]] | None = None
-) -> tuple[PolicyProcessorPipeline[dict[str, Any], dict[str, Any]], PolicyProcessorPipeline[PolicyAction, PolicyAction]]:
+) -> tuple[
+    PolicyProcessorPipeline[dict[str, Any], dict[str, Any]],
+    PolicyProcessorPipeline[PolicyAction, PolicyAction],
+]:
     return make_default_pre_post_processors(config, dataset_stats)

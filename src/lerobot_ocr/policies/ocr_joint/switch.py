@@ -84,7 +84,9 @@ def decide(score: torch.Tensor, threshold: float, state: SwitchState) -> Decisio
         ValueError: `score` is not (B,) for the state's B rows.
     """
     if score.shape != state.recovering.shape:
-        raise ValueError(f"score has shape {tuple(score.shape)}, expected ({state.batch_size},) for the state's rows.")
+        raise ValueError(
+            f"score has shape {tuple(score.shape)}, expected ({state.batch_size},) for the state's rows."
+        )
     score = score.to(state.recovering.device)
     chunk_done = state.recovering & (state.actions_left == 0)
     hand_back = chunk_done & (score >= threshold)
@@ -99,7 +101,12 @@ def advance(state: SwitchState, decision: Decision, chunk_size: int) -> SwitchSt
     The recovery action a row executes at this step is its chunk's `chunk_size - 1 - actions_left`
     (actions_left of the returned state).
     """
-    left = torch.where(decision.needs_chunk, torch.full_like(state.actions_left, chunk_size), state.actions_left)
+    left = torch.where(
+        decision.needs_chunk, torch.full_like(state.actions_left, chunk_size), state.actions_left
+    )
     left = torch.where(decision.recovering, left - 1, left)
-    chunks = torch.where(decision.enter, torch.zeros_like(state.chunks), state.chunks) + decision.needs_chunk.long()
+    chunks = (
+        torch.where(decision.enter, torch.zeros_like(state.chunks), state.chunks)
+        + decision.needs_chunk.long()
+    )
     return SwitchState(decision.recovering, left, chunks, state.handed_back | decision.hand_back)

@@ -1,6 +1,6 @@
 """`lerobot-train`, with every dataset item computed once and then served from memory.
 
-Usage: python benchmarks/train_in_memory.py <lerobot-train arguments>
+Usage: python -m lerobot_ocr.train_in_memory <lerobot-train arguments>
 
 For low-dimensional datasets only (no camera features; it refuses others). LeRobot 0.6.1 builds each
 item with several arrow `select` queries (≈ 3.5 ms per item on 2 CPU cores: 0.25 s of a 0.32 s
@@ -35,7 +35,11 @@ class InMemoryDataset:
 
 
 def cache_items(dataset) -> InMemoryDataset:
-    """Compute every item of `dataset` (a LeRobotDataset) once; return the in-memory view."""
+    """Compute every item of `dataset` (a LeRobotDataset) once; return the in-memory view.
+
+    Raises:
+        ValueError: a dataset with camera features.
+    """
     if dataset.meta.camera_keys:
         raise ValueError(
             f"train_in_memory is for low-dim datasets; this one has cameras {dataset.meta.camera_keys}. "

@@ -1,0 +1,41 @@
+"""benchmarks/summary.py and benchmarks/probe.py: the largest measurement per cell; the adopt rule."""
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+import probe  # noqa: E402
+import summary  # noqa: E402
+
+
+def cell(rate: float, n: int) -> dict:
+    return {"success_rate": rate, "n_episodes": n, "ci95": [0.0, 1.0]}
+
+
+def test_the_summary_takes_each_cells_largest_measurement(tmp_path):
+    result = {c: cell(0.8, 50) for c in summary.CELLS}
+    assert summary.best_cell(result, "joint_ood") == (40, 50)
+    result["over_200_episodes"] = {"joint_ood": {"successes": 128, "n_episodes": 200}}
+    assert summary.best_cell(result, "joint_ood") == (128, 200) and summary.best_cell(result, "base_id") == (
+        40,
+        50,
+    )
+    assert summary.fmt(128, 200) == "0.64 [0.57, 0.70]"
+
+
+def test_a_probe_is_adoptable_only_outside_its_baselines_interval():
+    baseline = {"name": "plain", "success_rate": 0.64, "ci95": [0.57, 0.70]}
+    assert probe.verdict({"success_rate": 0.685}, baseline) == "inside"
+    assert probe.verdict({"success_rate": 0.75}, baseline) == "outside"
+    assert probe.verdict({"success_rate": 0.5}, None) == "—"
+    common = {"date": "2026-11-30", "checkpoint": "c", "region": "ood", "n_episodes": 200}
+    rows = [
+        {**baseline, **common, "change": []},
+        {**common, "name": "d11", "success_rate": 0.75, "ci95": [0.69, 0.80], "baseline": "plain",
+         "change": ["--policy.fixed_delay=11"]},
+    ]  # fmt: skip
+    text = probe.render(rows)
+    assert (
+        "| d11 | `c` | `--policy.fixed_delay=11` | ood | 0.75 | [0.69, 0.80] | 200 | plain: 0.64 | outside |"
+        in text
+    )

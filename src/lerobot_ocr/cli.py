@@ -13,7 +13,7 @@ def _demo(args: argparse.Namespace) -> int:
 
         demo(args.output_dir or "outputs/demo", restart=args.restart)
         return 0
-    from lerobot_ocr.demo import run_manifold_demo
+    from lerobot_ocr.manifold_demo import run_manifold_demo
 
     summary = run_manifold_demo(
         args.output_dir or "outputs/demo_manifold",

@@ -1,4 +1,4 @@
-"""`lerobot-ocr demo manifold`: fit the keypoint manifold on synthetic Push-T data, draw the recovery field."""
+"""`lerobot-ocr demo manifold`: fit the keypoint manifold on synthetic Push-T data, plot the recovery field."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""`lerobot-ocr demo manifold`: fit the keypoint manifold on synthetic Push-T data, plot the recovery field."""
+"""`lerobot-ocr demo manifold`: fit the keypoint manifold on synthetic Push-T data; plot the recovery."""
 
 from __future__ import annotations
 

@@ -40,15 +40,24 @@ def test_a_nan_score_decides_nothing():
     state = SwitchState.start(2)
     first = decide(torch.tensor([-1.0, 1.0], dtype=torch.float64), 0.0, state)
     assert first.enter.tolist() == [True, False] and first.needs_chunk.tolist() == [True, False]
-    state = advance(state, first, chunk_size=1)  # row 0's chunk has run: it needs a decision
+    state = advance(state, first, chunk_size=5)
+    state = SwitchState(state.recovering, torch.tensor([3, 0]), state.chunks, state.handed_back)  # mid-chunk
     nothing = decide(torch.tensor([NAN, NAN], dtype=torch.float64), 0.0, state)
     assert nothing.recovering.tolist() == [True, False]  # keeps its mode, hands nothing back
-    assert not nothing.enter.any() and not nothing.hand_back.any()
+    assert not nothing.enter.any() and not nothing.hand_back.any() and not nothing.needs_chunk.any()
+
+
+def test_a_recovering_row_at_its_chunks_end_must_be_scored():
+    state = advance(
+        SwitchState.start(1), decide(torch.tensor([-1.0]), 0.0, SwitchState.start(1)), chunk_size=1
+    )
+    with pytest.raises(ValueError, match="needs a score"):
+        decide(torch.tensor([NAN]), 0.0, state)
 
 
 def test_when_a_check_is_needed():
     state = SwitchState.start(2)
-    assert needs_check(None, 5)  # first step
+    assert needs_check(state, 0)  # first step: the base's queue is empty after reset
     assert not needs_check(state, 5)  # every row inside a base chunk
     assert needs_check(state, 0) and needs_check(state, None)  # the base plans now / queue unknown
     recovering = SwitchState(torch.tensor([True, False]), state.actions_left, state.chunks, state.handed_back)
@@ -56,5 +65,5 @@ def test_when_a_check_is_needed():
 
 
 def test_decide_rejects_scores_for_other_rows():
-    with pytest.raises(ValueError, match="expected \\(2,\\)"):
+    with pytest.raises(ValueError, match="one per row"):
         decide(torch.zeros(3), 0.0, SwitchState.start(2))

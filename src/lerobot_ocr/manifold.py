@@ -335,9 +335,9 @@ class KeypointManifold(nn.Module):
           1 far away. Differences of log densities do not depend on units, so the same temperature
           works in pixels and metres, and the step size alpha of the planner is a speed.
         The output vector is the mean over keypoints, as in the paper. An OOD keypoint set whose
-        every keypoint lies above its own threshold (deficit 0 everywhere, yet a low score on
-        average) would get a zero "log_deficit" vector; it gets the "paper" magnitude's instead, so
-        an OOD set always has a direction.
+        "log_deficit" vector is (near) zero, e.g. every keypoint above its own threshold yet a low
+        score on average, gets the "paper" magnitude's vector instead, so an OOD set has a direction
+        wherever the density has a gradient.
 
         Raises:
             ValueError: unknown `magnitude`, keypoints of the wrong shape or non-finite.

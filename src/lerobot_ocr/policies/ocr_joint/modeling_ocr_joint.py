@@ -4,8 +4,8 @@ Per step: observe (object pose -> keypoints -> manifold score and recovery vecto
 batch) -> decide per row (`switch.decide`) -> plan a recovery chunk for the rows that need one
 (keypoint plan -> keypoint inverse policy) -> mix the base's actions with the recovery actions.
 A recovery chunk runs `n_recovery_action_steps` actions before its row decides again; rows on the
-base are checked when the base is about to plan its next chunk, as in the paper, so a step inside a
-base chunk costs what the base costs.
+base are checked when the base is about to plan its next chunk, as in the paper (and at every step
+while another row recovers), so while every row is inside a base chunk a step costs what the base costs.
 
 The base sees every observation, also while a row recovers (its observation history stays right),
 and its queued actions are dropped whenever a row hands back to it, so it never executes a chunk
@@ -269,7 +269,8 @@ class OcrJointPolicy(PreTrainedPolicy):
 
     # ------------------------------------------------------------------------------ inference
     def reset(self):
-        """Start new episodes: clear the base's queues and the switch; keep the last rollout's stats."""
+        """Start new episodes: clear the base's queues and the switch; the last rollout's `ocr_stats()`
+        move to `completed_stats`."""
         self._archive_stats()
         self.base.reset()
         self._switch: SwitchState | None = None
@@ -369,7 +370,7 @@ class OcrJointPolicy(PreTrainedPolicy):
 
         `batch` is the env observation after our preprocessor; `noise` seeds the inverse policy's
         sampling of any recovery chunk planned at this step. Raises KeyError / ValueError for a
-        missing or non-finite object pose.
+        missing or non-finite object pose at a step that checks it (not inside a base chunk).
         """
         state = batch[self.config.state_key]
         b, device = (1 if state.ndim == 1 else state.shape[0]), state.device

@@ -2,10 +2,10 @@
 
 The paper's joint policy (arXiv 2411.03294, "joint policy"): pi_joint = pi_b if eta_rec >= eps_rec,
 else pi_inv, with eta_rec the keypoints' density score and eps_rec the threshold (here: the manifold's
-`score` and its calibrated `threshold_`). As in the paper, a decision
-is taken at a chunk boundary: a recovering row re-decides once its recovery chunk has run, and rows
-on the base are checked when the base is about to plan its next chunk (or whenever another row of the
-batch is deciding, since the score is computed for the whole batch at once).
+`score` and its calibrated `threshold_`). As in the paper, a recovering row re-decides once its
+recovery chunk has run. Rows on the base are checked when the base is about to plan its next chunk,
+and at every step while any row of the batch recovers (the score is computed for the whole batch at
+once): a row on the base whose object leaves the distribution then enters recovery at once.
 
 This module is pure: `SwitchState` holds what the switch remembers per row, `decide` maps a score, the
 threshold and a state to a `Decision`, `advance` gives the state after the step. No policy, no
@@ -39,9 +39,14 @@ class SwitchState:
     @classmethod
     def start(cls, batch_size: int, device: torch.device | str = "cpu") -> SwitchState:
         """Every row on the base, nothing queued: the state at the start of an episode."""
-        false = torch.zeros(batch_size, dtype=torch.bool, device=device)
-        zero = torch.zeros(batch_size, dtype=torch.long, device=device)
-        return cls(recovering=false, actions_left=zero, chunks=zero, handed_back=false)
+
+        def flags():
+            return torch.zeros(batch_size, dtype=torch.bool, device=device)
+
+        def counts():
+            return torch.zeros(batch_size, dtype=torch.long, device=device)
+
+        return cls(recovering=flags(), actions_left=counts(), chunks=counts(), handed_back=flags())
 
     @property
     def batch_size(self) -> int:
@@ -65,34 +70,39 @@ class Decision:
     needs_chunk: torch.Tensor
 
 
-def needs_check(state: SwitchState | None, base_queued: int | None) -> bool:
-    """Whether this step needs the score: a new episode, a recovering row, or a base about to plan.
+def needs_check(state: SwitchState, base_queued: int | None) -> bool:
+    """Whether this step needs the score: a recovering row, or a base about to plan (its queue is
+    empty, as at an episode's first step after `reset`).
 
     base_queued: actions the base will pop before it plans again (None: unknown, so always check).
     """
-    return state is None or bool(state.recovering.any()) or not base_queued
+    return bool(state.recovering.any()) or not base_queued
 
 
 def decide(score: torch.Tensor, threshold: float, state: SwitchState) -> Decision:
     """The switch for one step: (B,) scores (NaN = not evaluated), the threshold and the state -> Decision.
 
-    A row recovering whose chunk has run (`actions_left == 0`) hands back when score >= threshold;
-    a row on the base enters recovery when score < threshold; a recovering row with no action left
-    needs a new chunk. A NaN score decides nothing: the row keeps its mode.
+    A recovering row whose chunk has run (`actions_left == 0`) hands back when score >= threshold,
+    else it needs a new chunk; a row on the base enters recovery (and needs a chunk) when score <
+    threshold. A NaN score decides nothing: a row on the base stays there, a recovering row goes on
+    with its chunk.
 
     Raises:
-        ValueError: `score` is not (B,) for the state's B rows.
+        ValueError: `score` is not (B,) for the state's B rows, or is NaN for a recovering row whose
+            chunk has run (it has no action left, so it must be scored).
     """
     if score.shape != state.recovering.shape:
         raise ValueError(
-            f"score has shape {tuple(score.shape)}, expected ({state.batch_size},) for the state's rows."
+            f"score has shape {tuple(score.shape)}, expected ({state.batch_size},): one per row."
         )
     score = score.to(state.recovering.device)
     chunk_done = state.recovering & (state.actions_left == 0)
+    if bool((chunk_done & score.isnan()).any()):
+        raise ValueError("A recovering row whose chunk has run needs a score (got NaN): score every row.")
     hand_back = chunk_done & (score >= threshold)
     enter = ~state.recovering & (score < threshold)
     recovering = (state.recovering & ~hand_back) | enter
-    return Decision(recovering, enter, hand_back, recovering & (state.actions_left == 0))
+    return Decision(recovering, enter, hand_back, enter | (chunk_done & ~hand_back))
 
 
 def advance(state: SwitchState, decision: Decision, chunk_size: int) -> SwitchState:

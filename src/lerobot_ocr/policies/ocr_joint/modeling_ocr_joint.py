@@ -292,6 +292,9 @@ class OcrJointPolicy(PreTrainedPolicy):
         action_dim = self.config.output_features[ACTION].shape[0]
         self._switch = SwitchState.start(b, device)
         self._chunk = torch.zeros(b, self.config.n_recovery_action_steps, action_dim, device=device)
+        self._unchecked = torch.full(
+            (b,), float("nan"), dtype=torch.float64
+        )  # the score where none was needed
 
     def _observe(self, batch: dict[str, torch.Tensor]) -> Observed:
         """Pose -> keypoints -> score and recovery vector (one manifold evaluation for the batch)."""
@@ -348,18 +351,35 @@ class OcrJointPolicy(PreTrainedPolicy):
         )
         self._chunk[idx] = actions[:, : self._chunk.shape[1]].to(self._chunk)
 
+    def _decide(self, obs: Observed | None, noise: torch.Tensor | None, device) -> torch.Tensor:
+        """Switch the rows, plan the chunks they need, hand back; return the (B,) scores (NaN: unchecked)."""
+        if obs is None:  # every row on the base, inside its chunk: nothing to decide
+            return self._unchecked
+        score = obs.recovery.score.to(device)
+        decision = decide(score, float(self.manifold.threshold_), self._switch)
+        if bool(decision.needs_chunk.any()):
+            self._plan_chunks(obs, decision.needs_chunk, noise)
+        if bool(decision.hand_back.any()):
+            drop_queued_actions(self.base)  # its queue was planned before or during the recovery
+        self._switch = advance(self._switch, decision, self._chunk.shape[1])
+        self._n_chunks += int(decision.needs_chunk.sum())
+        self._n_handbacks += int(decision.hand_back.sum())
+        return score
+
     def _mix(self, batch: dict[str, torch.Tensor], device: torch.device) -> torch.Tensor:
         """(B, A) actions: the base's for rows on the base, the current recovery action for the others."""
         recovering = self._switch.recovering
+        n_recovering = self._switch.n_recovering
         base_batch = self._base_pre(dict(batch))
-        if bool(recovering.all()):
+        if n_recovering == len(recovering):
             observe_only(self.base, base_batch)  # history stays right; nothing planned for nobody
             drop_queued_actions(self.base)
             action = torch.zeros(self._chunk.shape[0], self._chunk.shape[2], device=device)
         else:
             action = self._base_post(self.base.select_action(base_batch)).to(device, torch.float32)
-        step = self._chunk.shape[1] - 1 - self._switch.actions_left
-        action[recovering] = self._chunk[recovering, step[recovering]]
+        if n_recovering:
+            step = self._chunk.shape[1] - 1 - self._switch.actions_left
+            action[recovering] = self._chunk[recovering, step[recovering]]
         return action
 
     @torch.no_grad()
@@ -376,18 +396,9 @@ class OcrJointPolicy(PreTrainedPolicy):
         b, device = (1 if state.ndim == 1 else state.shape[0]), state.device
         self._start_rows(b, device)
         obs = self._observe(batch) if needs_check(self._switch, queued_actions(self.base)) else None
-        unchecked = torch.full((b,), float("nan"), dtype=torch.float64, device=device)  # decides nothing
-        score = unchecked if obs is None else obs.recovery.score.to(device)
-        decision = decide(score, float(self.manifold.threshold_), self._switch)
-        if bool(decision.needs_chunk.any()):
-            self._plan_chunks(obs, decision.needs_chunk, noise)
-        if bool(decision.hand_back.any()):
-            drop_queued_actions(self.base)  # its queue was planned before or during the recovery
-        self._switch = advance(self._switch, decision, self._chunk.shape[1])
-        self._n_chunks += int(decision.needs_chunk.sum())
-        self._n_handbacks += int(decision.hand_back.sum())
-        self._scores.append(score.cpu())
-        self._modes.append(decision.recovering.cpu())
+        score = self._decide(obs, noise, device)
+        self._scores.append(score.cpu())  # on the CPU already when unchecked
+        self._modes.append(self._switch.recovering.cpu())
         return self._mix(batch, device)
 
     @torch.no_grad()

@@ -16,6 +16,7 @@ Shapes: B = batch rows; tensors are 1-D (B,) on one device.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import torch
 
@@ -52,6 +53,11 @@ class SwitchState:
     def batch_size(self) -> int:
         return self.recovering.shape[0]
 
+    @cached_property
+    def n_recovering(self) -> int:
+        """How many rows recover (computed once per state: states are never changed in place)."""
+        return int(self.recovering.sum())
+
 
 @dataclass(frozen=True)
 class Decision:
@@ -76,7 +82,7 @@ def needs_check(state: SwitchState, base_queued: int | None) -> bool:
 
     base_queued: actions the base will pop before it plans again (None: unknown, so always check).
     """
-    return bool(state.recovering.any()) or not base_queued
+    return state.n_recovering > 0 or not base_queued
 
 
 def decide(score: torch.Tensor, threshold: float, state: SwitchState) -> Decision:

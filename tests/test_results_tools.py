@@ -12,14 +12,12 @@ def cell(rate: float, n: int) -> dict:
     return {"success_rate": rate, "n_episodes": n, "ci95": [0.0, 1.0]}
 
 
-def test_the_summary_takes_each_cells_largest_measurement(tmp_path):
-    result = {c: cell(0.8, 50) for c in summary.CELLS}
+def test_the_summary_takes_each_cells_largest_measurement():
+    result = {c: cell(0.8, 50) for c in summary.CELLS} | {"date": "2026-11-23"}
     assert summary.best_cell(result, "joint_ood") == (40, 50)
-    result["over_200_episodes"] = {"joint_ood": {"successes": 128, "n_episodes": 200}}
-    assert summary.best_cell(result, "joint_ood") == (128, 200) and summary.best_cell(result, "base_id") == (
-        40,
-        50,
-    )
+    result["over_200_episodes"] = {"date": "2026-11-24", "joint_ood": {"successes": 128, "n_episodes": 200}}
+    assert summary.largest(result, "joint_ood") == (128, 200, "2026-11-24")
+    assert summary.largest(result, "base_id") == (40, 50, "2026-11-23")
     assert summary.fmt(128, 200) == "0.64 [0.57, 0.70]"
 
 

@@ -97,15 +97,16 @@ def test_errors_are_clear(pusht_dataset, tmp_path):
             else frame["observation.object_pose"].numpy()
         )
 
-    with pytest.raises(ValueError, match="NaN/inf poses for 1 of .* frames \\(first: episode 0, frame 3\\)"):
+    with pytest.raises(
+        ValueError, match="invalid poses for 1 of .* frames \\(first: episode 0, frame 3: non-finite"
+    ):
         convert_dataset("local/pusht_ocr", tmp_path / "d", "pusht_t", flaky, **kw)
     calls.clear()
     fixed.append(True)
     convert_dataset("local/pusht_ocr", tmp_path / "d", "pusht_t", flaky, **kw)  # the fixed estimator
     assert calls == [3]  # only the failed frame is estimated again
-    (tmp_path / "e").mkdir()
-    with pytest.raises(FileExistsError, match="--overwrite"):
-        convert_dataset("local/pusht_ocr", tmp_path / "e", "pusht_t", "feature:observation.object_pose", **kw)
+    with pytest.raises(FileExistsError, match="--overwrite"):  # tmp_path / "d" holds a finished dataset now
+        convert_dataset("local/pusht_ocr", tmp_path / "d", "pusht_t", "feature:observation.object_pose", **kw)
 
 
 def test_cli_convert_and_push(pusht_dataset, tmp_path, monkeypatch):

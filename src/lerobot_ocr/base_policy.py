@@ -6,6 +6,7 @@ policy's own pre/post processors from a local `pretrained_model` folder or a hub
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -88,20 +89,64 @@ def load_base_policy(path: str | Path, device: str | torch.device, revision: str
     return BasePolicy(freeze(policy), pre, post)
 
 
-def observe_only(policy: PreTrainedPolicy, batch: dict[str, torch.Tensor]) -> None:
+def active_rename_map() -> dict[str, str]:
+    """The `--rename_map` of the `make_policy` call that is building a policy right now ({} if none).
+
+    LeRobot 0.6.1 hands `rename_map` to `make_policy` but not to the policy it builds, and renames the
+    batch in the preprocessor only; a wrapper that checks its base's inputs at construction needs it.
+    """
+    frame = inspect.currentframe()
+    while frame is not None:
+        if frame.f_code.co_name == "make_policy" and "rename_map" in frame.f_locals:
+            return dict(frame.f_locals["rename_map"] or {})
+        frame = frame.f_back
+    return {}
+
+
+def missing_inputs(
+    policy: PreTrainedPolicy, available, rename_map: dict[str, str] | None = None
+) -> list[str]:
+    """The policy's input features that `available` keys (after `rename_map`) do not provide."""
+    renamed = {(rename_map or {}).get(key, key) for key in available}
+    return sorted(key for key in policy.config.input_features if key not in renamed)
+
+
+def missing_inputs_message(missing: list[str], available, what: str) -> str:
+    """A clear error for `missing_inputs`: the keys, what is there, and the `--rename_map` fix."""
+    example = ", ".join(f'"<your key>": "{key}"' for key in missing[:2])
+    return (
+        f"The base policy reads {missing}, which {what} does not provide (it has {sorted(available)}). "
+        f"If they are there under other names, map them with --rename_map='{{{example}}}' (lerobot-train "
+        "and lerobot-eval take it); otherwise wrap a base trained on the features you have."
+    )
+
+
+def observe_only(policy: PreTrainedPolicy, batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
     """Feed an observation to a policy's history without predicting (keeps n_obs_steps > 1 right).
 
-    Mirrors what LeRobot's queue-based policies (diffusion) do at the top of `select_action`.
-    Policies without an observation queue (e.g. ACT with n_obs_steps=1) need nothing.
+    Mirrors what LeRobot's queue-based policies (diffusion, VQ-BeT) do at the top of `select_action`;
+    returns the batch as they queue it (cameras stacked under `observation.images`). Policies without
+    an observation queue (e.g. ACT with n_obs_steps=1) need nothing.
     """
     queues = getattr(policy, "_queues", None)
     if not isinstance(queues, dict):
-        return
+        return batch
     batch = dict(batch)
     image_keys = list(getattr(policy.config, "image_features", None) or {})
     if OBS_IMAGES in queues and image_keys:
         batch[OBS_IMAGES] = torch.stack([batch[k] for k in image_keys], dim=-4)
     populate_queues(queues, batch, exclude_keys=[ACTION])
+    return batch
+
+
+def predict_chunk(policy: PreTrainedPolicy, batch: dict[str, torch.Tensor]) -> torch.Tensor:
+    """The policy's action chunk (B, n, A) for this observation, as LeRobot's async server asks for it.
+
+    Queue-based policies (diffusion, VQ-BeT) build their chunk from their own observation history:
+    the observation joins it first, as in their `select_action` (on an empty history it fills it).
+    """
+    observation = {key: value for key, value in batch.items() if key != ACTION}  # as their select_action
+    return policy.predict_action_chunk(observe_only(policy, observation))
 
 
 def queued_actions(policy: PreTrainedPolicy) -> int | None:

@@ -4,7 +4,30 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
+
+TORCHCODEC_NOTE = (
+    "torchcodec cannot load FFmpeg's shared libraries (FFmpeg 4-8 is not installed): LeRobot decodes videos "
+    "with pyav instead. Install FFmpeg (e.g. `apt install ffmpeg`) to use torchcodec."
+)
+
+
+class TorchcodecNote(logging.Filter):
+    """LeRobot logs torchcodec's whole loading traceback (~100 lines, per process) when FFmpeg's
+    libraries are missing, although it then falls back to pyav and works: say it in one line."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if "'torchcodec' is installed but cannot be loaded" in record.getMessage():
+            record.msg, record.args = TORCHCODEC_NOTE, ()
+        return True
+
+
+def quiet_known_warnings() -> None:
+    """Shorten LeRobot's torchcodec traceback to one line; every other message stays as it is."""
+    logger = logging.getLogger("lerobot.utils.import_utils")
+    if not any(isinstance(f, TorchcodecNote) for f in logger.filters):
+        logger.addFilter(TorchcodecNote())
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -66,6 +89,7 @@ def _generate(args: argparse.Namespace, extra: list[str]) -> int:
         private=args.private,
         keep_work=args.keep_work,
         env_options=options,
+        overwrite=args.overwrite,
     )
     if args.task == "pusht":
         from lerobot_ocr.datagen.pusht import generate_pusht
@@ -186,6 +210,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_hub_flags(gen)
     gen.add_argument("--keep-work", action="store_true", help="Keep the per-episode cache <root>.work/.")
+    gen.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="Replace a finished dataset at --root (an unfinished run resumes).",
+    )
     gen.set_defaults(func=_generate)
 
     conv = sub.add_parser(
@@ -221,7 +250,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--source-keypoints", default=None, help="Layout of a keypoints:<name> source (default: --object)."
     )
     _add_hub_flags(conv)
-    conv.add_argument("--overwrite", action="store_true", help="Replace an existing --output-root.")
+    conv.add_argument("--overwrite", action="store_true", help="Replace a finished dataset at --output-root.")
     conv.set_defaults(func=_convert)
 
     ev = sub.add_parser(
@@ -235,6 +264,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    quiet_known_warnings()
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["eval"] and not {"-h", "--help"} & set(argv[1:]):
         # lerobot-eval's own `--key=value` flags pass through untouched (argparse would claim them).

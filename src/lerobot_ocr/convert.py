@@ -29,8 +29,8 @@ from tqdm import tqdm
 from lerobot_ocr.callables import load_callable
 from lerobot_ocr.constants import OBS_OBJECT_KEYPOINTS, OBS_OBJECT_POSE
 from lerobot_ocr.dataset_columns import read_columns
-from lerobot_ocr.files import atomic_save_npy
-from lerobot_ocr.geometry import matrix_to_pose, pose_size, pose_to_matrix
+from lerobot_ocr.files import atomic_save_npy, check_output
+from lerobot_ocr.geometry import matrix_to_pose, pose_defects, pose_size, pose_to_matrix
 from lerobot_ocr.keypoints import keypoints_to_pose, pose_to_keypoints, resolve_keypoints
 
 POSE_NAMES = {
@@ -52,14 +52,17 @@ def _feature_info(features: dict, name: str, repo_id: str) -> dict:
     return features[name]
 
 
-def _check_poses(poses: np.ndarray, episode: np.ndarray, frame: np.ndarray, source: str) -> None:
-    bad = ~np.isfinite(poses).all(-1)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
+def _check_poses(
+    poses: np.ndarray, rotation: str, episode: np.ndarray, frame: np.ndarray, source: str
+) -> None:
+    """Raise ValueError naming the first frame whose pose means nothing (`geometry.pose_defects`)."""
+    bad, reason = pose_defects(poses, rotation)
+    if bool(bad.any()):
+        i = int(np.flatnonzero(bad.numpy())[0])
         raise ValueError(
-            f"The pose source {source} gives NaN/inf poses for {int(bad.sum())} of {len(poses)} frames "
-            f"(first: episode {int(episode[i])}, frame {int(frame[i])}). Fix the source, or drop those "
-            "episodes first (lerobot-edit-dataset --operation.type=delete_episodes)."
+            f"The pose source {source} gives invalid poses for {int(bad.sum())} of {len(poses)} frames "
+            f"(first: episode {int(episode[i])}, frame {int(frame[i])}: {reason}). Fix the source, or drop "
+            "those episodes first (lerobot-edit-dataset --operation.type=delete_episodes)."
         )
 
 
@@ -178,7 +181,8 @@ def convert_dataset(
         The converted LeRobotDataset.
 
     Raises:
-        FileExistsError: `output_root` exists and `overwrite` is off.
+        FileExistsError: `output_root` holds a dataset and `overwrite` is off, or holds something else
+            (`lerobot_ocr.files.check_output`).
         ValueError: keypoints and pose disagree in dimension, the dataset is converted already, or
             its pose feature differs from the source's poses.
     """
@@ -191,12 +195,7 @@ def convert_dataset(
     if (rotation == "angle") != (d == 2):
         raise ValueError(f"Keypoint spec mismatch: {d}D keypoints with a {rotation!r} pose.")
     src_kps = resolve_keypoints(source_keypoints) if source_keypoints is not None else local
-    output_root = Path(output_root)
-    if output_root.exists():
-        if not overwrite:
-            raise FileExistsError(
-                f"{output_root} already exists; pass --overwrite or choose another --output-root."
-            )
+    output_root = check_output(output_root, overwrite)
     staging = output_root.with_name(output_root.name + ".tmp")
     work = output_root.with_name(output_root.name + ".work")
 
@@ -206,7 +205,7 @@ def convert_dataset(
     has_pose = OBS_OBJECT_POSE in features
     columns = read_columns(dataset.root, [k for k in (source, OBS_OBJECT_POSE if has_pose else None) if k])
     poses = compute_object_poses(columns, pose_from, rotation, src_kps, work, dataset)
-    _check_poses(poses, columns["episode_index"], columns["frame_index"], str(pose_from))
+    _check_poses(poses, rotation, columns["episode_index"], columns["frame_index"], str(pose_from))
     keypoints = pose_to_keypoints(pose_to_matrix(poses, rotation), local)  # (N, K, D) world
 
     dims = "xyz"[:d]

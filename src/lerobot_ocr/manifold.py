@@ -166,7 +166,10 @@ class KeypointManifold(nn.Module):
         (see `calibrate`).
 
         Raises:
-            ValueError: keypoints not (N, K, 2|3), or fewer frames than components.
+            ValueError: keypoints not (N, K, 2|3), NaN/inf, or degenerate: a keypoint that does not
+                move over the frames, or that takes fewer distinct positions than `n_components`
+                (a pose source that returns a constant, e.g.); a mixture fitted on such data gives
+                meaningless densities.
         """
         from sklearn.mixture import GaussianMixture
 
@@ -179,6 +182,7 @@ class KeypointManifold(nn.Module):
         n, k, d = x.shape
         if n < self.n_components:
             raise ValueError(f"Need at least n_components={self.n_components} frames to fit, got {n}.")
+        self._check_spread(x)
         gmms = [
             GaussianMixture(
                 n_components=self.n_components,
@@ -195,6 +199,20 @@ class KeypointManifold(nn.Module):
         if calibration_quantile is not None:
             self.calibrate(x, calibration_quantile)
         return self
+
+    def _check_spread(self, x: np.ndarray) -> None:
+        """Raise ValueError for a keypoint that hardly moves over the (N, K, D) training frames."""
+        scale = 1.0 + float(np.abs(x).max())
+        for i in range(x.shape[1]):
+            spread = float((x[:, i].max(0) - x[:, i].min(0)).max())
+            distinct = len(np.unique(np.round(x[:, i] / (1e-9 * scale)), axis=0))
+            if spread <= 1e-9 * scale or distinct < self.n_components:
+                raise ValueError(
+                    f"Keypoint {i} takes {distinct} distinct position(s) over {len(x)} frames (spread "
+                    f"{spread:.3g}), fewer than n_components={self.n_components}: the object does not move "
+                    "in these frames, or the pose source returns a constant. Check the pose source "
+                    "(`lerobot-ocr convert --pose-from ...`, your estimator), or lower n_components."
+                )
 
     def _set_from_sklearn(self, gmms: list) -> None:
         d = self.dim

@@ -63,6 +63,7 @@ class Task:
             f"local/{self.name}_demos",
             "--seed",
             "0",
+            "--overwrite",  # a run that finished but left no stage marker is made again
             *env_args,
         ]
         return args + list(self.lowdim_generate_args if p["base"] == "lowdim" else ())

@@ -54,6 +54,9 @@ def cache_items(dataset) -> InMemoryDataset:
 def main() -> None:
     from lerobot.scripts import lerobot_train
 
+    from lerobot_ocr.cli import quiet_known_warnings
+
+    quiet_known_warnings()
     make = lerobot_train.make_train_eval_datasets
 
     def make_cached(cfg):

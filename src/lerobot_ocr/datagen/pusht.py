@@ -78,14 +78,17 @@ def generate_pusht(
     keep_work: bool = False,
     max_attempts: int | None = None,
     env_options: dict | None = None,
+    overwrite: bool = False,
 ):
     """Generate `episodes` successful expert demonstrations starting in `region`; return the dataset.
 
     Attempt j uses env seed `seed + j`; failed attempts are skipped (only successes are kept).
     env_options: other `pusht_ocr` env settings (`PushtOcrEnvConfig` fields, e.g. {"region_axis": 1,
     "region_threshold": 200.0}), as `--env.<field>=<value>` gives them to lerobot-eval.
+    overwrite: replace a finished dataset at `root` (else refused; an unfinished run always resumes).
     Raises:
         TypeError: an unknown env option. ValueError: a work dir made with other settings.
+        FileExistsError: `root` holds a dataset and `overwrite` is off, or holds something else.
     """
     from lerobot_ocr.envs.configs import PushtOcrEnvConfig
     from lerobot_ocr.envs.pusht_env import make_pusht_ocr_env
@@ -94,7 +97,7 @@ def generate_pusht(
     root = Path(root)
     options = env_settings(env_options)
     env_cfg = PushtOcrEnvConfig(**{**options, "region": region, "obs_type": "pixels_agent_pos"})
-    work = work_dir(root)
+    work = work_dir(root, overwrite)
     env = make_pusht_ocr_env(**{k: v for k, v in env_cfg.gym_kwargs.items() if k != "max_episode_steps"})
     expert = PushTExpert(seed=seed)
     paths = collect_episodes(

@@ -18,17 +18,17 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from lerobot_ocr.files import atomic_write
+from lerobot_ocr.files import atomic_write, check_output
 
 
-def work_dir(root: Path) -> Path:
+def work_dir(root: Path, overwrite: bool = False) -> Path:
     """The per-episode cache `<root>.work/` of a generator that writes the dataset `root` (created here).
 
     Raises:
-        FileExistsError: `root` exists and is not a LeRobotDataset.
+        FileExistsError: `root` holds a dataset and `overwrite` is off, or holds something else
+            (`lerobot_ocr.files.check_output`).
     """
-    if root.exists() and not (root / "meta" / "info.json").exists():
-        raise FileExistsError(f"{root} exists and is not a LeRobotDataset; choose another --root.")
+    check_output(root, overwrite)
     work = root.with_name(root.name + ".work")
     work.mkdir(parents=True, exist_ok=True)
     return work

@@ -91,6 +91,7 @@ def generate_square(
     keep_work: bool = False,
     max_attempts: int | None = None,
     env_options: dict | None = None,
+    overwrite: bool = False,
 ):
     """Generate `episodes` successful expert demonstrations with the nut starting in `region`.
 
@@ -98,8 +99,10 @@ def generate_square(
     low-dim observations only (no cameras rendered: several times faster). env_options: other
     `square_ocr` env settings (`SquareOcrEnvConfig` fields, e.g. the nut boxes {"id_y": (0.1, 0.2)}),
     as `--env.<field>=<value>` gives them to lerobot-eval.
+    overwrite: replace a finished dataset at `root` (else refused; an unfinished run always resumes).
     Raises:
         TypeError: an unknown env option. ValueError: a work dir made with other settings.
+        FileExistsError: `root` holds a dataset and `overwrite` is off, or holds something else.
     """
     from lerobot_ocr.envs.configs import SquareOcrEnvConfig
     from lerobot_ocr.envs.square_env import make_square_ocr_env
@@ -109,7 +112,7 @@ def generate_square(
     options = env_settings(env_options)
     obs_type = "pixels_agent_pos" if images else "environment_state_agent_pos"
     env_cfg = SquareOcrEnvConfig(**{**options, "region": region, "obs_type": obs_type})
-    work = work_dir(root)
+    work = work_dir(root, overwrite)
     env = make_square_ocr_env(obs_type=obs_type, region=region, regions=env_cfg.nut_regions, render_mode=None)
     expert = SquareExpert(seed=seed)
     paths = collect_episodes(

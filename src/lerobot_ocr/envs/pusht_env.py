@@ -90,15 +90,30 @@ class PushTOcrEnv(PushTEnv):
         return self.classify(pose, block_keypoints(pose))
 
     def reset(self, seed=None, options=None):
-        """Gym reset: a seed gives one start in the env's region; `options["reset_to_state"]` bypasses it.
+        """Gym reset: a seed gives one start in the env's region.
+
+        `options["reset_to_state"]` = [agent x, agent y, block x, block y, block angle] bypasses the
+        region and puts the block exactly there: the observed `object_pose` equals the request (gym-pusht
+        itself sets the angle after the position, turning the block about its centre of mass, so its
+        blocks land up to ~90 px away from poses taken from a dataset).
 
         Raises:
             RuntimeError: no start of the requested region within `max_reset_tries` draws.
+            ValueError: a `reset_to_state` that is not 5 finite numbers.
         """
         if options is not None and options.get("reset_to_state") is not None:
-            obs, info = super().reset(seed=seed, options=options)
-            info["start_region"] = self.start_region()
-            return obs, info
+            state = np.asarray(options["reset_to_state"], dtype=np.float64)
+            if state.shape != (5,) or not np.isfinite(state).all():
+                raise ValueError(
+                    "reset_to_state must be 5 finite numbers [agent x, agent y, block x, block y, block "
+                    f"angle], got {options['reset_to_state']!r}."
+                )
+            super().reset(seed=seed, options=options)
+            self.block.angle = float(state[4])  # the angle first, then the position: the pose asked for
+            self.block.position = [float(state[2]), float(state[3])]
+            self.space.reindex_shapes_for_body(self.block)
+            info = {**self._get_info(), "is_success": False, "start_region": self.start_region()}
+            return self.get_obs(), info
         for i in range(self.max_reset_tries):
             # Only the first try is seeded; later tries continue the same RNG stream, so a seed
             # always maps to the same accepted start.

@@ -2,7 +2,9 @@
 
 from lerobot_ocr.geometry.poses import (
     POSE_SIZES,
+    check_poses,
     matrix_to_pose,
+    pose_defects,
     pose_dim,
     pose_size,
     pose_to_matrix,
@@ -35,6 +37,8 @@ from lerobot_ocr.geometry.rotations import (
 
 __all__ = [
     "POSE_SIZES",
+    "check_poses",
+    "pose_defects",
     "angle_to_matrix",
     "axis_angle_to_matrix",
     "compose",

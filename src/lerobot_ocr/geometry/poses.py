@@ -14,9 +14,10 @@ import torch
 
 from lerobot_ocr.geometry import rigid, rotations
 from lerobot_ocr.geometry._backend import numpy_compatible
-from lerobot_ocr.validation import check_finite, check_trailing_shape
+from lerobot_ocr.validation import check_trailing_shape
 
 POSE_SIZES: dict[str, int] = {"angle": 3, "quat_wxyz": 7, "quat_xyzw": 7, "axis_angle": 6, "rot6d": 9}
+DEGENERATE = 1e-6  # a quaternion or rot6d row shorter than this holds no rotation
 
 
 def pose_size(rotation: str) -> int:
@@ -35,12 +36,64 @@ def pose_dim(rotation: str) -> int:
     return 2 if pose_size(rotation) == 3 else 3
 
 
+def pose_defects(pose: torch.Tensor, rotation: str) -> tuple[torch.Tensor, str]:
+    """Which poses mean nothing, and why: (..., P) poses -> ((...,) bool mask, the first defect's reason).
+
+    A pose is defective when it holds NaN/inf, or when its rotation is degenerate although finite:
+    a quaternion of (near) zero length (a tracker dropout often writes zeros), or rot6d rows of
+    (near) zero length or parallel to each other (Gram-Schmidt has no second axis). Angles and
+    axis-angles are valid whenever finite. The reason is "" when no pose is defective.
+    """
+    pose = torch.as_tensor(pose)
+    bad = ~torch.isfinite(pose).all(-1)
+    reasons = ["non-finite values (NaN/inf)"]
+    rot = torch.nan_to_num(pose[..., 3:].to(torch.float64))
+    if rotation in ("quat_wxyz", "quat_xyzw"):
+        checks = [(torch.linalg.vector_norm(rot, dim=-1) < DEGENERATE, "a zero-length quaternion")]
+    elif rotation == "rot6d":
+        a, b = rot[..., :3], rot[..., 3:]
+        na, nb = torch.linalg.vector_norm(a, dim=-1), torch.linalg.vector_norm(b, dim=-1)
+        cross = torch.linalg.vector_norm(torch.linalg.cross(a, b, dim=-1), dim=-1)
+        checks = [
+            ((na < DEGENERATE) | (nb < DEGENERATE), "a zero-length rot6d row"),
+            (cross < DEGENERATE * na * nb, "parallel rot6d rows"),
+        ]
+    else:
+        checks = []
+    first_reason = reasons[0] if bool(bad.any()) else ""
+    for mask, reason in checks:
+        mask = mask & ~bad
+        if bool(mask.any()) and not first_reason:
+            first_reason = reason
+        bad = bad | mask
+    return bad, first_reason
+
+
+def check_poses(pose: torch.Tensor, rotation: str, name: str = "pose", hint: str = "") -> None:
+    """Raise ValueError naming the first pose that means nothing (see `pose_defects`) and why.
+
+    Raises:
+        ValueError: a NaN/inf pose or a degenerate rotation.
+    """
+    bad, reason = pose_defects(pose, rotation)
+    if bool(bad.any()):
+        first = tuple(int(i) for i in torch.nonzero(bad)[0])
+        raise ValueError(
+            f"{name} has {int(bad.sum())} invalid pose(s) ({reason} first, at index {first}). "
+            f"{hint or 'The object pose is missing or invalid for some frames; fix or drop them.'}"
+        )
+
+
 @numpy_compatible
 def pose_to_matrix(pose: torch.Tensor, rotation: str) -> torch.Tensor:
-    """(..., P) pose vector -> (..., d+1, d+1) homogeneous transform. Rejects NaN/inf poses."""
+    """(..., P) pose vector -> (..., d+1, d+1) homogeneous transform.
+
+    Raises:
+        ValueError: a pose of the wrong size, with NaN/inf, or with a degenerate rotation (`pose_defects`).
+    """
     size = pose_size(rotation)
     check_trailing_shape(pose, (size,), "pose", f"A {rotation!r} pose has {size} numbers.")
-    check_finite(pose, "pose", "The object pose is missing or invalid for some frames; fix or drop them.")
+    check_poses(pose, rotation)
     if rotation == "angle":
         return rigid.make_transform(rotations.angle_to_matrix(pose[..., 2]), pose[..., :2])
     pos, rot = pose[..., :3], pose[..., 3:]

@@ -42,6 +42,8 @@ class OcrJointConfig(PreTrainedConfig):
     Manifold and switch
         n_components: Gaussian components per keypoint. Default 4.
         covariance_type: scikit-learn's GaussianMixture covariance type. Default "full".
+        reg_covar: added to each covariance's diagonal, squared object units: raise it when the
+            object's demo positions hardly vary along some axis. Default 1e-6 (scikit-learn's).
         score_type: "mean_log_density" (default) | "min_log_density" | "mean_density" (the paper's).
         threshold: the switch's threshold on the score (score < threshold: recover); None (default)
             = calibrate: the `calibration_quantile` of the training frames' scores, minus
@@ -79,6 +81,7 @@ class OcrJointConfig(PreTrainedConfig):
     # Manifold and switch.
     n_components: int = 4
     covariance_type: str = "full"
+    reg_covar: float = 1e-6
     score_type: str = "mean_log_density"
     threshold: float | None = None
     calibration_quantile: float = 0.02
@@ -143,6 +146,8 @@ class OcrJointConfig(PreTrainedConfig):
             )
         if not 1 <= self.n_recovery_action_steps <= self.horizon:
             raise ValueError(f"--policy.n_recovery_action_steps must be in [1, horizon={self.horizon}].")
+        if not self.reg_covar > 0:
+            raise ValueError(f"--policy.reg_covar must be > 0 (squared object units), got {self.reg_covar}.")
         if not self.d_max > self.d_min:
             raise ValueError(f"Need d_max > d_min, got d_min={self.d_min}, d_max={self.d_max}.")
         if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:

@@ -33,14 +33,25 @@ from lerobot.utils.constants import ACTION
 from lerobot.utils.device_utils import resolve_safetensors_device
 from safetensors.torch import load_model as load_model_as_safetensor
 
-from lerobot_ocr.base_policy import drop_queued_actions, load_base_policy, observe_only, queued_actions
+from lerobot_ocr.base_policy import (
+    PROCESSOR_FILES,
+    active_rename_map,
+    drop_queued_actions,
+    load_base_policy,
+    missing_inputs,
+    missing_inputs_message,
+    observe_only,
+    predict_chunk,
+    queued_actions,
+)
 from lerobot_ocr.dataset_columns import episode_last_positions, read_columns, window_positions
-from lerobot_ocr.geometry import pose_to_matrix
+from lerobot_ocr.geometry import pose_defects, pose_to_matrix
 from lerobot_ocr.inverse_policy import KeypointInversePolicy
 from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
 from lerobot_ocr.manifold import KeypointManifold, RecoveryOutput
 from lerobot_ocr.planner import RecoveryPlanner
 from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
+from lerobot_ocr.policies.ocr_joint.processor_ocr_joint import make_ocr_joint_pre_post_processors
 from lerobot_ocr.policies.ocr_joint.switch import SwitchState, advance, decide, needs_check
 
 BASE_DIR = "base"
@@ -104,6 +115,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         self.manifold = KeypointManifold(
             n_components=config.n_components,
             covariance_type=config.covariance_type,
+            reg_covar=config.reg_covar,
             score_type=config.score_type,
             n_keypoints=k,
             dim=d,
@@ -149,6 +161,12 @@ class OcrJointPolicy(PreTrainedPolicy):
             )
         self.base = base.policy
         self._base_pre, self._base_post = base.preprocessor, base.postprocessor
+        missing = missing_inputs(self.base, config.input_features, active_rename_map())
+        if missing:
+            raise ValueError(missing_inputs_message(missing, config.input_features, "the dataset"))
+        self._base_inputs_checked = (
+            False  # against the first observation (an env may differ from the dataset)
+        )
 
         self._has_table = False
         if dataset_meta is not None:
@@ -186,13 +204,14 @@ class OcrJointPolicy(PreTrainedPolicy):
         order = np.argsort(cols["index"], kind="stable")
         cols = {key: v[order] for key, v in cols.items()}
         pose = torch.as_tensor(cols[cfg.object_pose_key], dtype=torch.float32)
-        bad = ~torch.isfinite(pose).all(-1)
+        bad, reason = pose_defects(pose, cfg.pose_rotation)
         if bool(bad.any()):
             first = int(np.flatnonzero(bad.numpy())[0])
             raise ValueError(
-                f"{int(bad.sum())} frame(s) of {cfg.object_pose_key} are NaN/inf (first: episode "
-                f"{int(cols['episode_index'][first])}, frame {int(cols['frame_index'][first])}). Re-run "
-                "`lerobot-ocr convert` with a pose source that covers every frame, or drop those episodes."
+                f"{int(bad.sum())} frame(s) of {cfg.object_pose_key} are invalid (first: episode "
+                f"{int(cols['episode_index'][first])}, frame {int(cols['frame_index'][first])}: {reason}). "
+                "Re-run `lerobot-ocr convert` with a pose source that covers every frame, or drop those "
+                "episodes."
             )
         frames = self._pose_matrix(pose)
         kw = {"persistent": False}
@@ -366,10 +385,20 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._n_handbacks += int(decision.hand_back.sum())
         return score
 
+    def _check_base_inputs(self, batch: dict[str, torch.Tensor]) -> None:
+        """At the first observation: does it hold every input of the base? (an env may differ from data)"""
+        if not self._base_inputs_checked:
+            missing = missing_inputs(self.base, batch)
+            if missing:
+                available = [k for k in batch if k.startswith("observation")]
+                raise KeyError(missing_inputs_message(missing, available, "the observation"))
+            self._base_inputs_checked = True
+
     def _mix(self, batch: dict[str, torch.Tensor], device: torch.device) -> torch.Tensor:
         """(B, A) actions: the base's for rows on the base, the current recovery action for the others."""
         recovering = self._switch.recovering
         n_recovering = self._switch.n_recovering
+        self._check_base_inputs(batch)
         base_batch = self._base_pre(dict(batch))
         if n_recovering == len(recovering):
             observe_only(self.base, base_batch)  # history stays right; nothing planned for nobody
@@ -403,10 +432,16 @@ class OcrJointPolicy(PreTrainedPolicy):
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, torch.Tensor], **kwargs) -> torch.Tensor:
-        """A stateless chunk (B, n, A): recovery actions for OOD rows, the base's chunk for the others."""
+        """One chunk (B, n, A) for this observation, as LeRobot's async inference server asks for it:
+        recovery actions for OOD rows, the base's chunk for the others.
+
+        Call it once per observation: a queue-based base (diffusion, VQ-BeT) adds the observation to
+        its history, as its `select_action` would. The switch's per-row state is not used.
+        """
         obs = self._observe(batch)
+        self._check_base_inputs(batch)
         ood = obs.recovery.is_ood.to(obs.frames.device)
-        base_chunk = self._base_post(self.base.predict_action_chunk(self._base_pre(dict(batch))))
+        base_chunk = self._base_post(predict_chunk(self.base, self._base_pre(dict(batch))))
         n = min(self.config.n_recovery_action_steps, base_chunk.shape[1])
         out = base_chunk[:, :n].to(obs.frames.device, torch.float32).clone()
         if bool(ood.any()):
@@ -439,7 +474,8 @@ class OcrJointPolicy(PreTrainedPolicy):
     def _save_pretrained(
         self, save_directory: Path, state_dict: dict[str, torch.Tensor] | None = None
     ) -> None:
-        """config.json + model.safetensors (manifold, inverse policy) + base/ (the base's own folder)."""
+        """config.json + model.safetensors (manifold, inverse policy) + our processors + base/ (the base's
+        own folder): a folder that lerobot-eval / lerobot-rollout load as it is (`--policy.path`)."""
         save_directory = Path(save_directory)
         self.config._save_pretrained(save_directory)
         sd = state_dict if state_dict is not None else self.state_dict()
@@ -447,10 +483,24 @@ class OcrJointPolicy(PreTrainedPolicy):
         total = sum(t.numel() * t.element_size() for t in own.values())
         save_torch_state_dict(own, str(save_directory), max_shard_size=max(total, 1))
         (save_directory / KEYPOINTS_FILE).write_text(json.dumps(self.object_keypoints_.tolist()))
+        self._save_processors(save_directory)
         base_dir = save_directory / BASE_DIR
         self.base.save_pretrained(base_dir)
         self._base_pre.save_pretrained(base_dir)
         self._base_post.save_pretrained(base_dir)
+
+    def _save_processors(self, save_directory: Path) -> None:
+        """The policy's own pre/post processors: those it was loaded with, else fresh ones (identity
+        normalisation; lerobot-train writes its own over them, after this)."""
+        from lerobot.policies.factory import make_pre_post_processors
+
+        source = getattr(self, "_processor_dir", None)
+        if source is not None and all((Path(source) / name).is_file() for name in PROCESSOR_FILES):
+            pre, post = make_pre_post_processors(self.config, pretrained_path=str(source))
+        else:
+            pre, post = make_ocr_joint_pre_post_processors(self.config)
+        pre.save_pretrained(save_directory)
+        post.save_pretrained(save_directory)
 
     @classmethod
     def from_pretrained(
@@ -487,6 +537,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         if config is None:
             config = PreTrainedConfig.from_pretrained(path, **kwargs)
         instance = cls(config, bundle_dir=path, **kwargs)
+        instance._processor_dir = path  # its processors (with any rename map) go along when re-saved
         cls._load_as_safetensor(instance, os.path.join(path, MODEL_FILE), config.device, strict)
         instance.apply_threshold()  # run-time overrides: --policy.threshold / --policy.threshold_margin
         instance.to(config.device)

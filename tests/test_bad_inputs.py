@@ -1,0 +1,252 @@
+"""Bad inputs and LeRobot's edges (issue 24): each case of a kind asserts the right behaviour.
+
+Kinds: poses that are finite but mean nothing; degenerate training data; a base that reads features
+the data lacks; `predict_action_chunk` on queue-based bases; checkpoints saved outside lerobot-train;
+writes that would replace data; gym-pusht's `reset_to_state`; LeRobot's torchcodec traceback.
+"""
+
+import logging
+
+import numpy as np
+import pytest
+import torch
+
+from conftest import TINY_DIFFUSION, TINY_OCR, save_base_checkpoint
+from lerobot_ocr.geometry import pose_defects, pose_to_matrix
+
+pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
+
+OOD_POSE = [400.0, 120.0, 0.5]
+
+
+def make_joint(base, dataset, rename_map=None, **overrides):
+    from lerobot.datasets import LeRobotDatasetMetadata
+    from lerobot.policies.factory import make_policy
+
+    from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
+
+    cfg = OcrJointConfig(base_path=str(base), **{**TINY_OCR, **overrides})
+    meta = LeRobotDatasetMetadata("local/pusht_ocr_ocr", root=dataset)
+    return make_policy(cfg, ds_meta=meta, rename_map=rename_map)
+
+
+def observation(poses, image_key="observation.image"):
+    poses = torch.tensor(poses, dtype=torch.float32)
+    b = len(poses)
+    return {
+        image_key: torch.rand(b, 3, 96, 96, generator=torch.Generator().manual_seed(0)),
+        "observation.state": torch.full((b, 2), 200.0),
+        "observation.object_pose": poses,
+        "task": ["push"] * b,
+    }
+
+
+# ---------------------------------------------------------------- kind 1: finite poses that mean nothing
+@pytest.mark.parametrize(
+    ("rotation", "good", "bad", "reason"),
+    [
+        ("quat_wxyz", [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0], "a zero-length quaternion"),
+        ("quat_xyzw", [0.0, 0.0, 0.0, 2.0], [0.0, 0.0, 0.0, 1e-9], "a zero-length quaternion"),
+        ("rot6d", [1.0, 0, 0, 0, 1.0, 0], [0.0, 0, 0, 0, 1.0, 0], "a zero-length rot6d row"),
+        ("rot6d", [1.0, 0, 0, 0, 1.0, 0], [1.0, 0, 0, 2.0, 0, 0], "parallel rot6d rows"),
+    ],
+)
+def test_degenerate_rotations_are_named(rotation, good, bad, reason):
+    poses = torch.tensor([[0.1, 0.2, 0.3, *good], [0.1, 0.2, 0.3, *bad], [0.1, 0.2, 0.3, *good]])
+    mask, why = pose_defects(poses, rotation)
+    assert mask.tolist() == [False, True, False] and why == reason
+    with pytest.raises(ValueError, match=f"{reason} first, at index \\(1,\\)"):
+        pose_to_matrix(poses, rotation)  # what the policy and every pose conversion go through
+    assert torch.isfinite(pose_to_matrix(poses[[0, 2]], rotation)).all()
+
+
+def test_convert_stops_at_a_tracker_dropout_naming_episode_and_frame(pusht_dataset, tmp_path):
+    from lerobot_ocr.convert import convert_dataset
+
+    def tracker(frame):  # a 3D pose estimator whose quaternion is all zeros in frame 5 (a dropout)
+        x, y, _ = frame["observation.object_pose"].numpy()
+        quat = [0.0, 0.0, 0.0, 0.0] if int(frame["index"]) == 5 else [1.0, 0.0, 0.0, 0.0]
+        return np.array([x / 1000, y / 1000, 0.0, *quat])
+
+    with pytest.raises(ValueError, match="first: episode 0, frame 5: a zero-length quaternion"):
+        convert_dataset("local/pusht_ocr", tmp_path / "out", "axes:0.05", tracker, root=pusht_dataset)
+    assert not (tmp_path / "out").exists()
+
+
+def test_identical_keypoint_sets_are_refused_and_reg_covar_is_an_option(diffusion_base, converted_dataset):
+    from lerobot_ocr.manifold import KeypointManifold
+    from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
+
+    constant = np.tile(np.random.default_rng(0).uniform(0, 500, size=(1, 9, 2)), (50, 1, 1))
+    with pytest.raises(ValueError, match="Keypoint 0 takes 1 distinct position.*pose source"):
+        KeypointManifold(n_components=4).fit(constant)
+    few = constant + np.arange(50)[:, None, None] % 3  # 3 distinct sets for 4 components
+    with pytest.raises(ValueError, match="3 distinct position"):
+        KeypointManifold(n_components=4).fit(few)
+    with pytest.raises(ValueError, match="reg_covar must be > 0"):
+        OcrJointConfig(device="cpu", reg_covar=0.0)
+    joint = make_joint(diffusion_base, converted_dataset, reg_covar=4.0)
+    assert joint.manifold.reg_covar == 4.0
+
+
+# ------------------------------------------------------------ kind 2: the base against the data it runs on
+def renamed_base(pusht_dataset, out, key="observation.images.top"):
+    """A tiny diffusion base trained (untrained here) on a camera named `key` instead of observation.image."""
+    from lerobot.datasets import LeRobotDatasetMetadata
+    from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
+    from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+    from lerobot.utils.feature_utils import dataset_to_policy_features
+
+    meta = LeRobotDatasetMetadata("local/pusht_ocr", root=pusht_dataset)
+    feats = dataset_to_policy_features(meta.features)
+    cfg = DiffusionConfig(**TINY_DIFFUSION, spatial_softmax_num_keypoints=8, pretrained_backbone_weights=None)
+    cfg.use_group_norm, cfg.crop_shape = True, None
+    cfg.input_features = {key: feats["observation.image"], "observation.state": feats["observation.state"]}
+    cfg.output_features = {"action": feats["action"]}
+    stats = dict(meta.stats)
+    stats[key] = stats["observation.image"]
+    policy = get_policy_class("diffusion")(cfg)
+    pre, post = make_pre_post_processors(cfg, dataset_stats=stats)
+    for obj in (policy, pre, post):
+        obj.save_pretrained(out)
+    return out
+
+
+def test_a_base_reading_features_the_data_lacks_is_refused_at_construction(pusht_dataset, converted_dataset):
+    base = renamed_base(pusht_dataset, pusht_dataset.with_name("base_top"))
+    with pytest.raises(ValueError, match="reads \\['observation.images.top'\\].*--rename_map"):
+        make_joint(base, converted_dataset)
+    # with LeRobot's --rename_map the dataset's camera feeds the base: accepted, and it runs
+    joint = make_joint(base, converted_dataset, rename_map={"observation.image": "observation.images.top"})
+    joint.reset()
+    action = joint.select_action(observation([OOD_POSE, OOD_POSE], image_key="observation.images.top"))
+    assert action.shape == (2, 2) and torch.isfinite(action).all()
+
+
+def test_an_observation_without_the_bases_inputs_says_which(diffusion_base, converted_dataset):
+    joint = make_joint(diffusion_base, converted_dataset)
+    joint.reset()
+    obs = observation(
+        [OOD_POSE], image_key="observation.images.top"
+    )  # an env that names its camera otherwise
+    with pytest.raises(
+        KeyError, match="observation.image.*which the observation does not provide.*images.top.*--rename_map"
+    ):
+        joint.select_action(obs)
+
+
+def vqbet_base(pusht_dataset):
+    from lerobot.datasets import LeRobotDatasetMetadata
+    from lerobot.policies.vqbet.configuration_vqbet import VQBeTConfig
+
+    cfg = VQBeTConfig(
+        device="cpu", push_to_hub=False, n_obs_steps=2, n_action_pred_token=2, action_chunk_size=4,
+        crop_shape=None, pretrained_backbone_weights=None, use_group_norm=True,
+        spatial_softmax_num_keypoints=8,
+        vqvae_n_embed=8, vqvae_embedding_dim=16, vqvae_enc_hidden_dim=16, gpt_block_size=50, gpt_input_dim=32,
+        gpt_output_dim=32, gpt_n_layer=1, gpt_n_head=1, gpt_hidden_dim=32,
+    )  # fmt: skip
+    meta = LeRobotDatasetMetadata("local/pusht_ocr", root=pusht_dataset)
+    return save_base_checkpoint(cfg, meta, pusht_dataset.with_name("base_vqbet"))
+
+
+@pytest.mark.parametrize("kind", ["diffusion", "vqbet"])
+def test_predict_action_chunk_works_with_queue_based_bases(
+    kind, diffusion_base, pusht_dataset, converted_dataset
+):
+    """LeRobot's async inference server calls predict_action_chunk, fresh or after select_action."""
+    base = diffusion_base if kind == "diffusion" else vqbet_base(pusht_dataset)
+    joint = make_joint(base, converted_dataset, n_recovery_action_steps=4)
+    joint.reset()
+    id_pose = joint._tbl_frames[0]
+    from lerobot_ocr.geometry import matrix_to_pose
+
+    poses = [matrix_to_pose(id_pose, "angle").tolist(), OOD_POSE]
+    fresh = joint.predict_action_chunk(observation(poses))
+    joint.select_action(observation(poses))
+    after = joint.predict_action_chunk(observation(poses))
+    for chunk in (fresh, after):
+        assert chunk.shape[0] == 2 and chunk.shape[2] == 2 and 1 <= chunk.shape[1] <= 4
+        assert torch.isfinite(chunk).all()
+
+
+# ------------------------------------------------------------ kind 3: checkpoints saved outside lerobot-train
+def test_save_pretrained_writes_a_folder_lerobot_eval_loads(diffusion_base, converted_dataset, tmp_path):
+    joint = make_joint(diffusion_base, converted_dataset)
+    joint.save_pretrained(tmp_path / "ckpt")
+    for name in ("policy_preprocessor.json", "policy_postprocessor.json"):
+        assert (tmp_path / "ckpt" / name).is_file()  # top level, as lerobot-eval looks for them
+    from lerobot.policies.factory import make_pre_post_processors
+
+    loaded = type(joint).from_pretrained(tmp_path / "ckpt")
+    pre, post = make_pre_post_processors(loaded.config, pretrained_path=str(tmp_path / "ckpt"))
+    batch = pre(observation([OOD_POSE]))
+    assert post(loaded.select_action(batch)).shape == (1, 2)
+
+
+@pytest.mark.slow
+def test_a_saved_checkpoint_runs_under_lerobot_eval(diffusion_base, converted_dataset, tmp_path):
+    from lerobot_ocr.cli import main
+
+    make_joint(diffusion_base, converted_dataset).save_pretrained(tmp_path / "ckpt")
+    args = [f"--policy.path={tmp_path / 'ckpt'}", "--env.type=pusht_ocr", "--env.region=ood",
+            "--env.episode_length=8", "--eval.n_episodes=1", "--eval.batch_size=1", "--policy.device=cpu",
+            f"--output_dir={tmp_path / 'eval'}"]  # fmt: skip
+    assert main(["eval", *args]) == 0
+    assert (tmp_path / "eval" / "eval_info.json").is_file()
+
+
+# ---------------------------------------------------------------- kind 5: writes that would replace data
+def test_every_writer_refuses_to_replace_a_finished_dataset(pusht_dataset, tmp_path):
+    from lerobot_ocr.cli import main
+    from lerobot_ocr.convert import convert_dataset
+    from lerobot_ocr.datagen.pusht import generate_pusht
+
+    root = tmp_path / "demos"
+    generate_pusht(root, episodes=1, region="id", use_videos=False, seed=5)
+    first = (root / "meta" / "info.json").stat().st_mtime_ns
+    with pytest.raises(FileExistsError, match="already holds a finished dataset: pass --overwrite"):
+        main(["generate", "pusht", "--episodes", "1", "--root", str(root), "--no-videos", "--seed", "5"])
+    assert (root / "meta" / "info.json").stat().st_mtime_ns == first  # untouched
+    generate_pusht(root, episodes=1, region="id", use_videos=False, seed=6, overwrite=True)
+    assert (root / "meta" / "info.json").stat().st_mtime_ns != first
+    kw = {"root": pusht_dataset}
+    (tmp_path / "notes").mkdir()
+    for overwrite in (False, True):  # a folder that is not a dataset is never replaced
+        with pytest.raises(FileExistsError, match="not a LeRobotDataset"):
+            convert_dataset("local/pusht_ocr", tmp_path / "notes", "pusht_t",
+                            "feature:observation.object_pose",
+                            overwrite=overwrite, **kw)  # fmt: skip
+    with pytest.raises(FileExistsError, match="not a LeRobotDataset"):
+        generate_pusht(tmp_path / "notes", episodes=1, overwrite=True)
+
+
+# ---------------------------------------------------------------- kind 6: simulator quirks
+def test_pusht_reset_to_state_puts_the_block_where_asked():
+    pytest.importorskip("gym_pusht")
+    from lerobot_ocr.envs.pusht_env import make_pusht_ocr_env
+
+    env = make_pusht_ocr_env(obs_type="environment_state_agent_pos")
+    for state in ([100, 100, 200, 300, 2.6], [400, 50, 150, 380, -1.2]):
+        obs, info = env.reset(options={"reset_to_state": state})
+        np.testing.assert_allclose(obs["object_pose"][:2], state[2:4], atol=1.0)  # < 1 px
+        assert abs(np.angle(np.exp(1j * (obs["object_pose"][2] - state[4])))) < 1e-6
+        np.testing.assert_allclose(obs["agent_pos"], state[:2], atol=1.0)
+        assert info["start_region"] in ("id", "ood", "neither")
+    with pytest.raises(ValueError, match="5 finite numbers"):
+        env.reset(options={"reset_to_state": [1.0, 2.0, np.nan, 3.0, 0.0]})
+    env.close()
+
+
+# ---------------------------------------------------------------- also: a quiet CLI
+def test_the_torchcodec_traceback_becomes_one_line_and_nothing_else_changes():
+    from lerobot_ocr.cli import TORCHCODEC_NOTE, TorchcodecNote
+
+    note = TorchcodecNote()
+    long = "Could not load libtorchcodec...\n[start of libtorchcodec loading traceback]\n" + "x\n" * 100
+    record = logging.LogRecord("lerobot.utils.import_utils", logging.WARNING, __file__, 1,
+                               "%s\n'torchcodec' is installed but cannot be loaded (see the error above).",
+                               (long,), None)  # fmt: skip
+    assert note.filter(record) and record.getMessage() == TORCHCODEC_NOTE
+    other = logging.LogRecord("x", logging.WARNING, __file__, 1, "something else %d", (3,), None)
+    assert note.filter(other) and other.getMessage() == "something else 3"

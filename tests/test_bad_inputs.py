@@ -90,8 +90,9 @@ def test_identical_keypoint_sets_are_refused_and_reg_covar_is_an_option(diffusio
 
 
 # ------------------------------------------------------------ kind 2: the base against the data it runs on
-def renamed_base(pusht_dataset, out, key="observation.images.top"):
-    """A tiny diffusion base trained (untrained here) on a camera named `key` instead of observation.image."""
+def renamed_base(pusht_dataset, out, key="observation.images.top", action_dim=2):
+    """A tiny diffusion base trained (untrained here) on a camera named `key` instead of observation.image,
+    and on `action_dim`-D actions."""
     from lerobot.datasets import LeRobotDatasetMetadata
     from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
     from lerobot.policies.factory import get_policy_class, make_pre_post_processors
@@ -102,7 +103,7 @@ def renamed_base(pusht_dataset, out, key="observation.images.top"):
     cfg = DiffusionConfig(**TINY_DIFFUSION, spatial_softmax_num_keypoints=8, pretrained_backbone_weights=None)
     cfg.use_group_norm, cfg.crop_shape = True, None
     cfg.input_features = {key: feats["observation.image"], "observation.state": feats["observation.state"]}
-    cfg.output_features = {"action": feats["action"]}
+    cfg.output_features = {"action": type(feats["action"])(type=feats["action"].type, shape=(action_dim,))}
     stats = dict(meta.stats)
     stats[key] = stats["observation.image"]
     policy = get_policy_class("diffusion")(cfg)
@@ -121,6 +122,35 @@ def test_a_base_reading_features_the_data_lacks_is_refused_at_construction(pusht
     joint.reset()
     action = joint.select_action(observation([OOD_POSE, OOD_POSE], image_key="observation.images.top"))
     assert action.shape == (2, 2) and torch.isfinite(action).all()
+
+
+def test_a_base_with_other_feature_shapes_is_refused(pusht_dataset, converted_dataset):
+    base = renamed_base(pusht_dataset, pusht_dataset.with_name("base_3d_action"), "observation.image", 3)
+    with pytest.raises(ValueError, match="disagree on feature shapes.*action: \\(3,\\) vs \\(2,\\)"):
+        make_joint(base, converted_dataset)
+
+
+def test_nan_states_and_actions_are_named(diffusion_base, converted_dataset, monkeypatch):
+    joint = make_joint(diffusion_base, converted_dataset)
+    joint.reset()
+    obs = observation([OOD_POSE])
+    obs["observation.state"][0, 1] = float("nan")  # a robot reading that failed
+    with pytest.raises(ValueError, match="observation.state contains 1 non-finite"):
+        joint.select_action(obs)
+    from lerobot_ocr.policies.ocr_joint import modeling_ocr_joint
+
+    real = modeling_ocr_joint.read_columns
+
+    def broken(root, keys):  # a dataset whose action at frame 7 of episode 0 is NaN
+        cols = real(root, keys)
+        cols["action"][7] = np.nan
+        return cols
+
+    monkeypatch.setattr(modeling_ocr_joint, "read_columns", broken)
+    with pytest.raises(
+        ValueError, match="1 frame\\(s\\) of action hold NaN/inf \\(first: episode 0, frame 7\\)"
+    ):
+        make_joint(diffusion_base, converted_dataset)
 
 
 def test_an_observation_without_the_bases_inputs_says_which(diffusion_base, converted_dataset):

@@ -111,6 +111,22 @@ def missing_inputs(
     return sorted(key for key in policy.config.input_features if key not in renamed)
 
 
+def mismatched_features(
+    policy: PreTrainedPolicy, features: dict, rename_map: dict[str, str] | None = None
+) -> list[str]:
+    """'key: policy shape vs data shape' for each feature (inputs and action) both have, shaped otherwise.
+
+    features: {key: PolicyFeature} of the data (a dataset's), before `rename_map`.
+    """
+    renamed = {(rename_map or {}).get(key, key): ft for key, ft in features.items()}
+    theirs = {**policy.config.input_features, **policy.config.output_features}
+    return [
+        f"{key}: {tuple(ft.shape)} vs {tuple(renamed[key].shape)}"
+        for key, ft in theirs.items()
+        if key in renamed and tuple(ft.shape) != tuple(renamed[key].shape)
+    ]
+
+
 def missing_inputs_message(missing: list[str], available, what: str) -> str:
     """A clear error for `missing_inputs`: the keys, what is there, and the `--rename_map` fix."""
     example = ", ".join(f'"<your key>": "{key}"' for key in missing[:2])

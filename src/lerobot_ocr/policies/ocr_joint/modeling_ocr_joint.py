@@ -38,6 +38,7 @@ from lerobot_ocr.base_policy import (
     active_rename_map,
     drop_queued_actions,
     load_base_policy,
+    mismatched_features,
     missing_inputs,
     missing_inputs_message,
     observe_only,
@@ -53,6 +54,7 @@ from lerobot_ocr.planner import RecoveryPlanner
 from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
 from lerobot_ocr.policies.ocr_joint.processor_ocr_joint import make_ocr_joint_pre_post_processors
 from lerobot_ocr.policies.ocr_joint.switch import SwitchState, advance, decide, needs_check
+from lerobot_ocr.validation import check_finite
 
 BASE_DIR = "base"
 MODEL_FILE = "model.safetensors"
@@ -161,9 +163,17 @@ class OcrJointPolicy(PreTrainedPolicy):
             )
         self.base = base.policy
         self._base_pre, self._base_post = base.preprocessor, base.postprocessor
-        missing = missing_inputs(self.base, config.input_features, active_rename_map())
+        rename_map = active_rename_map()
+        missing = missing_inputs(self.base, config.input_features, rename_map)
         if missing:
             raise ValueError(missing_inputs_message(missing, config.input_features, "the dataset"))
+        features = {**config.input_features, **config.output_features}
+        mismatched = mismatched_features(self.base, features, rename_map)
+        if mismatched:
+            raise ValueError(
+                f"The base policy and the dataset disagree on feature shapes (base vs dataset): "
+                f"{mismatched}. Wrap a base trained on this robot's observations and actions."
+            )
         self._base_inputs_checked = (
             False  # against the first observation (an env may differ from the dataset)
         )
@@ -213,6 +223,15 @@ class OcrJointPolicy(PreTrainedPolicy):
                 "Re-run `lerobot-ocr convert` with a pose source that covers every frame, or drop those "
                 "episodes."
             )
+        for key in (cfg.state_key, ACTION):
+            finite = np.isfinite(cols[key].reshape(len(cols[key]), -1)).all(-1)
+            if not finite.all():
+                first = int(np.flatnonzero(~finite)[0])
+                raise ValueError(
+                    f"{int((~finite).sum())} frame(s) of {key} hold NaN/inf (first: episode "
+                    f"{int(cols['episode_index'][first])}, frame {int(cols['frame_index'][first])}). Drop or "
+                    "repair those episodes (lerobot-edit-dataset --operation.type=delete_episodes)."
+                )
         frames = self._pose_matrix(pose)
         kw = {"persistent": False}
         self.register_buffer("_tbl_index", torch.as_tensor(cols["index"], dtype=torch.long), **kw)
@@ -331,6 +350,9 @@ class OcrJointPolicy(PreTrainedPolicy):
         frames = self._pose_matrix(pose)  # rejects NaN/inf poses with a clear error
         keypoints = self._keypoints(frames)
         state = batch[cfg.state_key].to(torch.float32).reshape(pose.shape[0], -1)
+        check_finite(
+            state, cfg.state_key, "The robot state is missing or invalid; check the robot's readings."
+        )
         return Observed(
             frames, keypoints, state, self.manifold.recovery(keypoints.double(), magnitude=cfg.magnitude)
         )

@@ -14,7 +14,6 @@ import datetime as dt
 import json
 import os
 import platform
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -27,7 +26,8 @@ sys.path[:0] = [str(HERE), str(REPO / "src")]
 import summary  # noqa: E402
 from results_md import update_section  # noqa: E402
 
-from lerobot_ocr.pipeline import EVAL_SEED, Task, pictures, run_chain  # noqa: E402
+from lerobot_ocr.files import clear_workdir  # noqa: E402
+from lerobot_ocr.pipeline import EVAL_SEED, WORKDIR_MARKERS, Task, pictures, run_chain  # noqa: E402
 
 
 def parse_args(task: Task) -> argparse.Namespace:
@@ -74,8 +74,8 @@ def main(task: Task) -> None:
     args = parse_args(task)
     p = args.settings
     work = Path(args.workdir or REPO / "outputs" / f"{task.name}_ocr_{args.profile}").resolve()
-    if args.restart and work.exists():
-        shutil.rmtree(work)
+    if args.restart:
+        clear_workdir(work, WORKDIR_MARKERS)
     t_start = time.time()
     chain = run_chain(task, p, work, args.env_args)
     table = format_table(chain.results)

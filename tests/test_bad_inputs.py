@@ -60,17 +60,36 @@ def test_degenerate_rotations_are_named(rotation, good, bad, reason):
     assert torch.isfinite(pose_to_matrix(poses[[0, 2]], rotation)).all()
 
 
+def test_the_reason_given_is_the_first_bad_poses_own():
+    poses = torch.tensor([[0, 0, 0, 1.0, 0, 0, 0], [0, 0, 0, 0, 0, 0, 0], [0, 0, 0, float("nan"), 0, 0, 0]])
+    mask, why = pose_defects(poses, "quat_wxyz")
+    assert mask.tolist() == [False, True, True] and why == "a zero-length quaternion"
+    assert pose_defects(poses.numpy()[[0, 2, 1]], "quat_wxyz")[1] == "non-finite values (NaN/inf)"
+
+
 def test_convert_stops_at_a_tracker_dropout_naming_episode_and_frame(pusht_dataset, tmp_path):
+    from lerobot.datasets import LeRobotDataset
+    from lerobot.datasets.dataset_tools import remove_feature
+
     from lerobot_ocr.convert import convert_dataset
 
+    raw = tmp_path / "raw"  # a dataset with no pose feature yet: the tracker is the pose source
+    remove_feature(LeRobotDataset("local/pusht_ocr", root=pusht_dataset), ["observation.object_pose"],
+                   output_dir=raw, repo_id="local/raw")  # fmt: skip
+
+    fixed = []
+
     def tracker(frame):  # a 3D pose estimator whose quaternion is all zeros in frame 5 (a dropout)
-        x, y, _ = frame["observation.object_pose"].numpy()
-        quat = [0.0, 0.0, 0.0, 0.0] if int(frame["index"]) == 5 else [1.0, 0.0, 0.0, 0.0]
-        return np.array([x / 1000, y / 1000, 0.0, *quat])
+        x, y = frame["observation.state"].numpy()
+        dropout = int(frame["index"]) == 5 and not fixed
+        return np.array([x / 1000, y / 1000, 0.0, *([0.0] * 4 if dropout else [1.0, 0.0, 0.0, 0.0])])
 
     with pytest.raises(ValueError, match="first: episode 0, frame 5: a zero-length quaternion"):
-        convert_dataset("local/pusht_ocr", tmp_path / "out", "axes:0.05", tracker, root=pusht_dataset)
+        convert_dataset("local/raw", tmp_path / "out", "axes:0.05", tracker, root=raw)
     assert not (tmp_path / "out").exists()
+    fixed.append(True)  # the tracker is fixed: a re-run estimates the dropped frame again and succeeds
+    convert_dataset("local/raw", tmp_path / "out", "axes:0.05", tracker, root=raw)
+    assert (tmp_path / "out" / "meta" / "info.json").is_file()
 
 
 def test_identical_keypoint_sets_are_refused_and_reg_covar_is_an_option(diffusion_base, converted_dataset):
@@ -80,13 +99,17 @@ def test_identical_keypoint_sets_are_refused_and_reg_covar_is_an_option(diffusio
     constant = np.tile(np.random.default_rng(0).uniform(0, 500, size=(1, 9, 2)), (50, 1, 1))
     with pytest.raises(ValueError, match="Keypoint 0 takes 1 distinct position.*pose source"):
         KeypointManifold(n_components=4).fit(constant)
+    jitter = constant + np.random.default_rng(1).normal(scale=1e-4, size=constant.shape)  # a stuck tracker
+    with pytest.raises(ValueError, match="does not move"):
+        KeypointManifold(n_components=4).fit(jitter)
     few = constant + np.arange(50)[:, None, None] % 3  # 3 distinct sets for 4 components
     with pytest.raises(ValueError, match="3 distinct position"):
         KeypointManifold(n_components=4).fit(few)
     with pytest.raises(ValueError, match="reg_covar must be > 0"):
         OcrJointConfig(device="cpu", reg_covar=0.0)
-    joint = make_joint(diffusion_base, converted_dataset, reg_covar=4.0)
-    assert joint.manifold.reg_covar == 4.0
+    joint = make_joint(diffusion_base, converted_dataset, reg_covar=400.0)
+    variances = torch.diagonal(joint.manifold.covariances_, dim1=-2, dim2=-1)
+    assert float(variances.min()) >= 400.0  # the fit used it: every variance holds the 20 px floor
 
 
 # ------------------------------------------------------------ kind 2: the base against the data it runs on
@@ -182,22 +205,29 @@ def vqbet_base(pusht_dataset):
 
 @pytest.mark.parametrize("kind", ["diffusion", "vqbet"])
 def test_predict_action_chunk_works_with_queue_based_bases(
-    kind, diffusion_base, pusht_dataset, converted_dataset
+    kind, diffusion_base, pusht_dataset, converted_dataset, monkeypatch
 ):
-    """LeRobot's async inference server calls predict_action_chunk, fresh or after select_action."""
-    base = diffusion_base if kind == "diffusion" else vqbet_base(pusht_dataset)
-    joint = make_joint(base, converted_dataset, n_recovery_action_steps=4)
-    joint.reset()
-    id_pose = joint._tbl_frames[0]
+    """LeRobot's async server calls predict_action_chunk: fresh, after select_action, on 2 or 3 rows."""
     from lerobot_ocr.geometry import matrix_to_pose
 
-    poses = [matrix_to_pose(id_pose, "angle").tolist(), OOD_POSE]
-    fresh = joint.predict_action_chunk(observation(poses))
-    joint.select_action(observation(poses))
-    after = joint.predict_action_chunk(observation(poses))
-    for chunk in (fresh, after):
-        assert chunk.shape[0] == 2 and chunk.shape[2] == 2 and 1 <= chunk.shape[1] <= 4
-        assert torch.isfinite(chunk).all()
+    base = diffusion_base if kind == "diffusion" else vqbet_base(pusht_dataset)
+    joint = make_joint(base, converted_dataset, n_recovery_action_steps=4)
+    marker = torch.full((1, TINY_OCR["horizon"], 2), 123.0)
+    monkeypatch.setattr(
+        joint.inverse, "sample", lambda plan, state, frames, noise=None: marker.expand(len(plan), -1, -1)
+    )
+    joint.reset()
+    id_pose = matrix_to_pose(joint._tbl_frames[0], "angle").tolist()
+    fresh = joint.predict_action_chunk(observation([id_pose, OOD_POSE]))
+    joint.select_action(observation([id_pose, OOD_POSE]))
+    after = joint.predict_action_chunk(observation([id_pose, OOD_POSE]))
+    wider = joint.predict_action_chunk(observation([OOD_POSE, id_pose, id_pose]))  # another batch size
+    for chunk, ood in ((fresh, [1]), (after, [1]), (wider, [0])):
+        assert chunk.shape[2] == 2 and 1 <= chunk.shape[1] <= 4 and torch.isfinite(chunk).all()
+        assert (chunk[ood] == 123.0).all()  # OOD rows run the recovery
+        assert not (
+            chunk[[i for i in range(len(chunk)) if i not in ood]] == 123.0
+        ).any()  # the others the base
 
 
 # ------------------------------------------------------------ kind 3: checkpoints saved outside lerobot-train
@@ -209,9 +239,25 @@ def test_save_pretrained_writes_a_folder_lerobot_eval_loads(diffusion_base, conv
     from lerobot.policies.factory import make_pre_post_processors
 
     loaded = type(joint).from_pretrained(tmp_path / "ckpt")
-    pre, post = make_pre_post_processors(loaded.config, pretrained_path=str(tmp_path / "ckpt"))
-    batch = pre(observation([OOD_POSE]))
-    assert post(loaded.select_action(batch)).shape == (1, 2)
+    loaded.save_pretrained(tmp_path / "again")  # a loaded checkpoint re-saved (e.g. by push_to_hub)
+    for folder in ("ckpt", "again"):
+        pre, post = make_pre_post_processors(loaded.config, pretrained_path=str(tmp_path / folder))
+        loaded.reset()
+        assert post(loaded.select_action(pre(observation([OOD_POSE])))).shape == (1, 2)
+
+
+def test_a_checkpoint_trained_with_a_rename_map_loads_without_make_policy(
+    pusht_dataset, converted_dataset, tmp_path
+):
+    """LeRobot's async policy server calls from_pretrained directly, with no rename map in sight."""
+    base = renamed_base(pusht_dataset, pusht_dataset.with_name("base_top_2"))
+    rename = {"observation.image": "observation.images.top"}
+    make_joint(base, converted_dataset, rename_map=rename).save_pretrained(tmp_path / "ckpt")
+    from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
+
+    loaded = OcrJointPolicy.from_pretrained(tmp_path / "ckpt")
+    loaded.reset()
+    assert loaded.select_action(observation([OOD_POSE], image_key="observation.images.top")).shape == (1, 2)
 
 
 @pytest.mark.slow
@@ -242,6 +288,7 @@ def test_every_writer_refuses_to_replace_a_finished_dataset(pusht_dataset, tmp_p
     assert (root / "meta" / "info.json").stat().st_mtime_ns != first
     kw = {"root": pusht_dataset}
     (tmp_path / "notes").mkdir()
+    (tmp_path / "notes" / "todo.txt").write_text("not a dataset")
     for overwrite in (False, True):  # a folder that is not a dataset is never replaced
         with pytest.raises(FileExistsError, match="not a LeRobotDataset"):
             convert_dataset("local/pusht_ocr", tmp_path / "notes", "pusht_t",
@@ -249,6 +296,25 @@ def test_every_writer_refuses_to_replace_a_finished_dataset(pusht_dataset, tmp_p
                             overwrite=overwrite, **kw)  # fmt: skip
     with pytest.raises(FileExistsError, match="not a LeRobotDataset"):
         generate_pusht(tmp_path / "notes", episodes=1, overwrite=True)
+    (tmp_path / "made_by_hand").mkdir()  # an empty folder made beforehand is fine
+    convert_dataset(
+        "local/pusht_ocr", tmp_path / "made_by_hand", "pusht_t", "feature:observation.object_pose", **kw
+    )
+    assert (tmp_path / "made_by_hand" / "meta" / "info.json").is_file()
+
+
+def test_restart_deletes_only_a_work_dir(tmp_path):
+    from lerobot_ocr.files import clear_workdir
+    from lerobot_ocr.pipeline import WORKDIR_MARKERS
+
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "thesis.tex").write_text("years of work")
+    with pytest.raises(FileExistsError, match="not deleting it"):
+        clear_workdir(tmp_path / "mine", WORKDIR_MARKERS)  # `lerobot-ocr demo --output-dir mine --restart`
+    assert (tmp_path / "mine" / "thesis.tex").exists()
+    (tmp_path / "run" / "logs").mkdir(parents=True)
+    clear_workdir(tmp_path / "run", WORKDIR_MARKERS)
+    assert not (tmp_path / "run").exists()
 
 
 # ---------------------------------------------------------------- kind 6: simulator quirks
@@ -257,7 +323,8 @@ def test_pusht_reset_to_state_puts_the_block_where_asked():
     from lerobot_ocr.envs.pusht_env import make_pusht_ocr_env
 
     env = make_pusht_ocr_env(obs_type="environment_state_agent_pos")
-    for state in ([100, 100, 200, 300, 2.6], [400, 50, 150, 380, -1.2]):
+    # the last: the agent inside the block, where gym-pusht's own reset step pushes the block away
+    for state in ([100, 100, 200, 300, 2.6], [400, 50, 150, 380, -1.2], [210, 300, 200, 300, 0.3]):
         obs, info = env.reset(options={"reset_to_state": state})
         np.testing.assert_allclose(obs["object_pose"][:2], state[2:4], atol=1.0)  # < 1 px
         assert abs(np.angle(np.exp(1j * (obs["object_pose"][2] - state[4])))) < 1e-6
@@ -277,6 +344,36 @@ def test_the_torchcodec_traceback_becomes_one_line_and_nothing_else_changes():
     record = logging.LogRecord("lerobot.utils.import_utils", logging.WARNING, __file__, 1,
                                "%s\n'torchcodec' is installed but cannot be loaded (see the error above).",
                                (long,), None)  # fmt: skip
-    assert note.filter(record) and record.getMessage() == TORCHCODEC_NOTE
+    assert note.filter(record)
+    assert record.getMessage().startswith("torchcodec cannot be loaded (Could not load libtorchcodec)")
+    ffmpeg = (
+        "Could not load libtorchcodec.\nOSError: libavutil.so.59: cannot open shared object file: No such"
+    )
+    record = logging.LogRecord("lerobot", logging.WARNING, __file__, 1,
+                               "%s\n'torchcodec' is installed but cannot be loaded (see the error above).",
+                               (ffmpeg,), None)  # fmt: skip
+    note.filter(record)
+    assert record.getMessage() == TORCHCODEC_NOTE.format(
+        reason="FFmpeg's shared libraries (libavutil) are not on this system"
+    )
     other = logging.LogRecord("x", logging.WARNING, __file__, 1, "something else %d", (3,), None)
     assert note.filter(other) and other.getMessage() == "something else 3"
+    from lerobot_ocr.cli import main
+
+    logger = logging.getLogger("lerobot.utils.import_utils")
+    logger.filters = [f for f in logger.filters if not isinstance(f, TorchcodecNote)]
+    with pytest.raises(SystemExit):
+        main(["demo", "--help"])
+    assert any(isinstance(f, TorchcodecNote) for f in logger.filters)  # every lerobot-ocr command installs it
+
+
+def test_square_reset_refuses_options_it_does_not_take():
+    pytest.importorskip("robosuite")
+    from lerobot_ocr.envs.square_env import SquareOcrEnv
+
+    env = SquareOcrEnv(render_mode=None)  # nothing is simulated before the options are checked
+    with pytest.raises(ValueError, match="takes options=\\{'nut_start'"):
+        env.reset(options={"reset_to_state": [0.0] * 5})
+    with pytest.raises(ValueError, match="nut_start must be 3 finite numbers"):
+        env.reset(options={"nut_start": (0.1, float("nan"), 0.0)})
+    assert env._sim_env is None

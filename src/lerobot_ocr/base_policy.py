@@ -103,6 +103,29 @@ def active_rename_map() -> dict[str, str]:
     return {}
 
 
+def processor_rename_map(processor) -> dict[str, str]:
+    """The rename map a LeRobot processor pipeline applies first ({} if it renames nothing).
+
+    A base fine-tuned with `--rename_map` keeps that map in its own saved preprocessor.
+    """
+    for step in getattr(processor, "steps", []):
+        if isinstance(getattr(step, "rename_map", None), dict):
+            return dict(step.rename_map)
+    return {}
+
+
+def chain_renames(*maps: dict[str, str] | None) -> dict[str, str]:
+    """One map doing `maps` in turn: {a: b} then {b: c} gives {a: c} (and keeps {b: c})."""
+    out: dict[str, str] = {}
+    for m in maps:
+        for key, value in (m or {}).items():
+            for src, dst in list(out.items()):
+                if dst == key:
+                    out[src] = value
+            out.setdefault(key, value)
+    return out
+
+
 def missing_inputs(
     policy: PreTrainedPolicy, available, rename_map: dict[str, str] | None = None
 ) -> list[str]:

@@ -8,18 +8,23 @@ import logging
 import sys
 
 TORCHCODEC_NOTE = (
-    "torchcodec cannot load FFmpeg's shared libraries (FFmpeg 4-8 is not installed): LeRobot decodes videos "
-    "with pyav instead. Install FFmpeg (e.g. `apt install ffmpeg`) to use torchcodec."
+    "torchcodec cannot be loaded ({reason}); LeRobot decodes videos with pyav instead. Without FFmpeg 4-8 "
+    "on the system this is expected: install it (e.g. `apt install ffmpeg`) to use torchcodec."
 )
 
 
 class TorchcodecNote(logging.Filter):
-    """LeRobot logs torchcodec's whole loading traceback (~100 lines, per process) when FFmpeg's
-    libraries are missing, although it then falls back to pyav and works: say it in one line."""
+    """LeRobot logs torchcodec's whole loading traceback (~100 lines, per process) when it cannot load,
+    although it then falls back to pyav and works: say it in one line, keeping the error's first line."""
 
     def filter(self, record: logging.LogRecord) -> bool:
-        if "'torchcodec' is installed but cannot be loaded" in record.getMessage():
-            record.msg, record.args = TORCHCODEC_NOTE, ()
+        message = record.getMessage()
+        if "'torchcodec' is installed but cannot be loaded" in message:
+            if "libavutil" in message and "cannot open shared object file" in message:
+                reason = "FFmpeg's shared libraries (libavutil) are not on this system"
+            else:  # another cause (e.g. a torch / torchcodec mismatch): keep its first line
+                reason = message.strip().splitlines()[0].split(" Likely causes")[0].strip().rstrip(".:")
+            record.msg, record.args = TORCHCODEC_NOTE.format(reason=reason), ()
         return True
 
 

@@ -73,7 +73,7 @@ def _poses_from_estimator(dataset, estimator: Callable, rotation: str, work: Pat
     cache, done_path = work / "poses.npy", work / "done.npy"
     if cache.exists() and done_path.exists() and len(np.load(done_path)) == n:
         poses, done = np.load(cache), np.load(done_path)
-        done &= np.isfinite(poses).all(-1)  # frames the estimator failed on are tried again
+        done &= ~pose_defects(poses, rotation)[0].numpy()  # frames the estimator failed on are tried again
     else:
         poses, done = np.full((n, size), np.nan), np.zeros(n, dtype=bool)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Callable
 from pathlib import Path
 
@@ -11,7 +12,8 @@ import numpy as np
 def check_output(root: str | Path, overwrite: bool, flag: str = "--overwrite") -> Path:
     """The one rule for every command that writes a dataset (generate, convert, and later collect and
     merge): `root` may not exist yet; an existing LeRobotDataset there is replaced only with
-    `overwrite` (when the new one is complete); anything else there is never replaced.
+    `overwrite` (when the new one is complete); an empty folder is fine; anything else there is
+    never replaced.
 
     A writer's own unfinished work lives beside `root` (`<root>.work/`, `<root>.tmp/`), so resuming
     it needs no flag. Returns `root` as a Path.
@@ -20,7 +22,7 @@ def check_output(root: str | Path, overwrite: bool, flag: str = "--overwrite") -
         FileExistsError: `root` holds a dataset and `overwrite` is off, or holds something else.
     """
     root = Path(root)
-    if not root.exists():
+    if not root.exists() or (root.is_dir() and not any(root.iterdir())):
         return root
     if not (root / "meta" / "info.json").is_file():
         raise FileExistsError(f"{root} exists and is not a LeRobotDataset: choose another output folder.")
@@ -30,6 +32,22 @@ def check_output(root: str | Path, overwrite: bool, flag: str = "--overwrite") -
             "output folder."
         )
     return root
+
+
+def clear_workdir(work: str | Path, markers: tuple[str, ...]) -> None:
+    """Delete a resumable work dir to start over, but only one that holds that work (one of `markers`).
+
+    Raises:
+        FileExistsError: `work` holds something else (a dataset, your files): nothing is deleted.
+    """
+    work = Path(work)
+    if not work.exists():
+        return
+    if not any((work / m).exists() for m in markers) and any(work.iterdir()):
+        raise FileExistsError(
+            f"{work} does not look like this command's work dir: not deleting it. Pick another."
+        )
+    shutil.rmtree(work)
 
 
 def atomic_write(path: str | Path, write: Callable[[Path], object]) -> Path:

@@ -21,6 +21,7 @@ holds M components per keypoint.
 from __future__ import annotations
 
 import json
+import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -201,18 +202,33 @@ class KeypointManifold(nn.Module):
         return self
 
     def _check_spread(self, x: np.ndarray) -> None:
-        """Raise ValueError for a keypoint that hardly moves over the (N, K, D) training frames."""
-        scale = 1.0 + float(np.abs(x).max())
+        """Refuse keypoints that do not move over the (N, K, D) training frames; warn about flat axes.
+
+        "Does not move": its positions span less than 1e-3 of the object's size (the spread of a
+        frame's keypoints), or take fewer distinct values than there are components. A mixture
+        fitted there is a spike: a pose a hair away scores as far out of distribution.
+        """
+        size = float(np.linalg.norm(x[0] - x[0].mean(0), axis=-1).max()) * 2
+        tiny = max(1e-3 * size, 1e-9 * (1.0 + float(np.abs(x).max())))
         for i in range(x.shape[1]):
-            spread = float((x[:, i].max(0) - x[:, i].min(0)).max())
-            distinct = len(np.unique(np.round(x[:, i] / (1e-9 * scale)), axis=0))
-            if spread <= 1e-9 * scale or distinct < self.n_components:
+            ranges = x[:, i].max(0) - x[:, i].min(0)  # (D,)
+            distinct = len(np.unique(np.round(x[:, i] / tiny), axis=0))
+            if float(ranges.max()) <= tiny or distinct < self.n_components:
                 raise ValueError(
                     f"Keypoint {i} takes {distinct} distinct position(s) over {len(x)} frames (spread "
-                    f"{spread:.3g}), fewer than n_components={self.n_components}: the object does not move "
-                    "in these frames, or the pose source returns a constant. Check the pose source "
-                    "(`lerobot-ocr convert --pose-from ...`, your estimator), or lower n_components."
+                    f"{float(ranges.max()):.3g}, object size {size:.3g}), fewer than n_components="
+                    f"{self.n_components}: the object does not move in these frames, or the pose source "
+                    "returns a constant. Check the pose source (`lerobot-ocr convert --pose-from ...`, your "
+                    "estimator), or lower n_components."
                 )
+            flat = [d for d in range(x.shape[2]) if ranges[d] <= tiny]
+            if flat:
+                logging.warning(
+                    "Keypoint %d hardly moves along axis %s (range %.3g): its density there is set by "
+                    "reg_covar=%g (squared units); raise it to about the pose noise squared if real poses "
+                    "jitter along that axis.",
+                    i, flat, float(ranges[flat].max()), self.reg_covar,
+                )  # fmt: skip
 
     def _set_from_sklearn(self, gmms: list) -> None:
         d = self.dim

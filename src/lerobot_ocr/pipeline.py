@@ -21,12 +21,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
+from lerobot_ocr.files import clear_workdir
+
 BIN = Path(sys.executable).parent
 SRC = Path(__file__).resolve().parents[1]  # this checkout's `src` (or site-packages)
 CONFIGS = Path(__file__).resolve().parent / "configs" / "policy"
 LOWDIM_NORM = '{"VISUAL": "MEAN_STD", "STATE": "MIN_MAX", "ENV": "MIN_MAX", "ACTION": "MIN_MAX"}'
 EVAL_SEED = 100_000  # episode seeds EVAL_SEED + i, disjoint from the demos' 0..N
 CELLS = ("base_id", "base_ood", "joint_ood", "joint_id")  # (policy, start region) pairs
+WORKDIR_MARKERS = ("logs", "demos.json")  # what a chain's work dir holds (restart deletes only those)
 
 
 @dataclass
@@ -546,8 +549,8 @@ def demo(workdir: str | Path = "outputs/demo", restart: bool = False) -> Chain:
     from lerobot_ocr.eval_report import format_start_split, format_table
 
     work = Path(workdir).resolve()
-    if restart and work.exists():
-        shutil.rmtree(work)
+    if restart:
+        clear_workdir(work, WORKDIR_MARKERS)
     start = time.time()
     chain = run_chain(PUSHT, PUSHT.profiles["demo"], work)
     files = pictures(PUSHT, chain, work / "pictures")

@@ -108,6 +108,7 @@ def generate_pusht(
         lambda s: record_episode(env, expert, s),
         desc=f"Push-T expert demos ({region})",
         max_attempts=max_attempts,
+        replace_stale=overwrite,
     )
     env.close()
     ds = build_dataset(

@@ -62,15 +62,21 @@ def collect_episodes(
     record: Callable[[int], dict[str, np.ndarray] | None],
     desc: str,
     max_attempts: int | None = None,
+    replace_stale: bool = False,
 ) -> list[Path]:
     """Cache `episodes` successful episodes in `work`; `record(env_seed)` returns arrays or None (failed).
 
+    replace_stale: episodes cached with other `params` are deleted (with `--overwrite`), else refused.
     Raises:
-        ValueError: `work` holds episodes made with other `params`.
+        ValueError: `work` holds episodes made with other `params` and `replace_stale` is off.
         RuntimeError: too few successes within `max_attempts`.
     """
     ledger_path = work / "ledger.json"
     ledger = json.loads(ledger_path.read_text()) if ledger_path.exists() else {"tried": {}}
+    if replace_stale and ledger.get("params", params) != params:
+        shutil.rmtree(work)
+        work.mkdir(parents=True)
+        ledger = {"tried": {}}
     if ledger.get("params", params) != params:
         raise ValueError(
             f"{work} holds episodes generated with {ledger['params']}, not {params}. Use the same settings "

@@ -123,6 +123,7 @@ def generate_square(
         lambda s: record_episode(env, expert, s),
         desc=f"Square expert demos ({region})",
         max_attempts=max_attempts,
+        replace_stale=overwrite,
     )
     env.close()
     features = square_features(images, use_videos)

@@ -111,7 +111,9 @@ class PushTOcrEnv(PushTEnv):
             super().reset(seed=seed, options=options)
             self.block.angle = float(state[4])  # the angle first, then the position: the pose asked for
             self.block.position = [float(state[2]), float(state[3])]
+            self.block.velocity, self.block.angular_velocity = (0.0, 0.0), 0.0  # gym-pusht's step moved it
             self.space.reindex_shapes_for_body(self.block)
+            self.n_contact_points = 0
             info = {**self._get_info(), "is_success": False, "start_region": self.start_region()}
             return self.get_obs(), info
         for i in range(self.max_reset_tries):

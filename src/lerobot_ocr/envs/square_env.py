@@ -205,10 +205,26 @@ class SquareOcrEnv(gym.Env):
         return obs
 
     def reset(self, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
-        env = self.sim_env
+        """Gym reset: a seed gives one start (nut pose and robot noise) in the env's region.
+
+        `options={"nut_start": (x, y, yaw)}` places the nut there instead (world metres, radians);
+        LeRobot's own options (`lerobot_*`, e.g. its new-rollout flag) are ignored.
+        Raises:
+            ValueError: another option, or a `nut_start` that is not 3 finite numbers.
+        """
+        unknown = sorted(k for k in (options or {}) if k != "nut_start" and not k.startswith("lerobot_"))
+        if unknown:
+            raise ValueError(f"square_ocr reset takes options={{'nut_start': (x, y, yaw)}}, not {unknown}.")
+        start = None
         if options and options.get("nut_start") is not None:
             start = np.asarray(options["nut_start"], dtype=np.float64)
+            if start.shape != (3,) or not np.isfinite(start).all():
+                raise ValueError(
+                    f"nut_start must be 3 finite numbers (x, y, yaw), got {options['nut_start']!r}."
+                )
+        super().reset(seed=seed)
+        env = self.sim_env
+        if start is not None:
             label = self.regions.classify(start[:2])
         else:
             start, label = self.regions.sample(self.np_random, self.region)

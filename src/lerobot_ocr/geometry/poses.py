@@ -45,28 +45,24 @@ def pose_defects(pose: torch.Tensor, rotation: str) -> tuple[torch.Tensor, str]:
     axis-angles are valid whenever finite. The reason is "" when no pose is defective.
     """
     pose = torch.as_tensor(pose)
-    bad = ~torch.isfinite(pose).all(-1)
-    reasons = ["non-finite values (NaN/inf)"]
     rot = torch.nan_to_num(pose[..., 3:].to(torch.float64))
+    checks = [(~torch.isfinite(pose).all(-1), "non-finite values (NaN/inf)")]
     if rotation in ("quat_wxyz", "quat_xyzw"):
-        checks = [(torch.linalg.vector_norm(rot, dim=-1) < DEGENERATE, "a zero-length quaternion")]
+        checks.append((torch.linalg.vector_norm(rot, dim=-1) < DEGENERATE, "a zero-length quaternion"))
     elif rotation == "rot6d":
         a, b = rot[..., :3], rot[..., 3:]
         na, nb = torch.linalg.vector_norm(a, dim=-1), torch.linalg.vector_norm(b, dim=-1)
         cross = torch.linalg.vector_norm(torch.linalg.cross(a, b, dim=-1), dim=-1)
-        checks = [
-            ((na < DEGENERATE) | (nb < DEGENERATE), "a zero-length rot6d row"),
-            (cross < DEGENERATE * na * nb, "parallel rot6d rows"),
-        ]
-    else:
-        checks = []
-    first_reason = reasons[0] if bool(bad.any()) else ""
-    for mask, reason in checks:
-        mask = mask & ~bad
-        if bool(mask.any()) and not first_reason:
-            first_reason = reason
-        bad = bad | mask
-    return bad, first_reason
+        checks.append(((na < DEGENERATE) | (nb < DEGENERATE), "a zero-length rot6d row"))
+        checks.append((cross < DEGENERATE * na * nb, "parallel rot6d rows"))
+    code = torch.zeros(pose.shape[:-1], dtype=torch.long)  # 0: fine, i + 1: the first failed check i
+    for i, (mask, _) in reversed(list(enumerate(checks))):
+        code = torch.where(mask.cpu(), torch.full_like(code, i + 1), code)
+    bad = code > 0
+    if not bool(bad.any()):
+        return bad.to(pose.device), ""
+    first = tuple(int(j) for j in torch.nonzero(bad)[0])
+    return bad.to(pose.device), checks[int(code[first]) - 1][1]
 
 
 def check_poses(pose: torch.Tensor, rotation: str, name: str = "pose", hint: str = "") -> None:

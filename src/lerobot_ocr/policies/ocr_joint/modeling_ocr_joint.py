@@ -36,6 +36,7 @@ from safetensors.torch import load_model as load_model_as_safetensor
 from lerobot_ocr.base_policy import (
     PROCESSOR_FILES,
     active_rename_map,
+    chain_renames,
     drop_queued_actions,
     load_base_policy,
     mismatched_features,
@@ -43,6 +44,7 @@ from lerobot_ocr.base_policy import (
     missing_inputs_message,
     observe_only,
     predict_chunk,
+    processor_rename_map,
     queued_actions,
 )
 from lerobot_ocr.dataset_columns import episode_last_positions, read_columns, window_positions
@@ -163,17 +165,20 @@ class OcrJointPolicy(PreTrainedPolicy):
             )
         self.base = base.policy
         self._base_pre, self._base_post = base.preprocessor, base.postprocessor
-        rename_map = active_rename_map()
-        missing = missing_inputs(self.base, config.input_features, rename_map)
-        if missing:
-            raise ValueError(missing_inputs_message(missing, config.input_features, "the dataset"))
-        features = {**config.input_features, **config.output_features}
-        mismatched = mismatched_features(self.base, features, rename_map)
-        if mismatched:
-            raise ValueError(
-                f"The base policy and the dataset disagree on feature shapes (base vs dataset): "
-                f"{mismatched}. Wrap a base trained on this robot's observations and actions."
-            )
+        # The base reads the batch after LeRobot's --rename_map and then its own preprocessor's renames.
+        self._base_renames = processor_rename_map(self._base_pre)
+        if bundle_dir is None:  # building for training; a saved checkpoint passed this check then
+            renames = chain_renames(active_rename_map(), self._base_renames)
+            missing = missing_inputs(self.base, config.input_features, renames)
+            if missing:
+                raise ValueError(missing_inputs_message(missing, config.input_features, "the dataset"))
+            features = {**config.input_features, **config.output_features}
+            mismatched = mismatched_features(self.base, features, renames)
+            if mismatched:
+                raise ValueError(
+                    f"The base policy and the dataset disagree on feature shapes (base vs dataset): "
+                    f"{mismatched}. Wrap a base trained on this robot's observations and actions."
+                )
         self._base_inputs_checked = (
             False  # against the first observation (an env may differ from the dataset)
         )
@@ -211,6 +216,12 @@ class OcrJointPolicy(PreTrainedPolicy):
         """
         cfg = self.config
         cols = read_columns(root, [cfg.object_pose_key, cfg.state_key, ACTION])
+        source = Path(root) / "meta" / "ocr_object.json"
+        self._pose_source = (
+            f"--pose-from {json.loads(source.read_text())['pose_from']} (lerobot-ocr convert, {source})"
+            if source.is_file()
+            else f"the dataset at {root}"
+        )
         order = np.argsort(cols["index"], kind="stable")
         cols = {key: v[order] for key, v in cols.items()}
         pose = torch.as_tensor(cols[cfg.object_pose_key], dtype=torch.float32)
@@ -258,7 +269,10 @@ class OcrJointPolicy(PreTrainedPolicy):
     @torch.no_grad()
     def _fit_from_table(self) -> None:
         cfg = self.config
-        self.manifold.fit(self._tbl_keypoints.double(), calibration_quantile=cfg.calibration_quantile)
+        try:
+            self.manifold.fit(self._tbl_keypoints.double(), calibration_quantile=cfg.calibration_quantile)
+        except ValueError as e:  # say where this dataset's poses came from
+            raise ValueError(f"{e} This dataset's {cfg.object_pose_key}: {self._pose_source}.") from e
         self.calibrated_threshold_.fill_(float(self.manifold.threshold_))
         self.apply_threshold()
         n = len(self._tbl_index)
@@ -322,8 +336,12 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._n_chunks = self._n_handbacks = 0
 
     def _start_rows(self, b: int, device: torch.device) -> None:
-        """A first step, or a batch of another size (a new rollout): every row starts on the base."""
-        if self._switch is not None and self._switch.batch_size == b:
+        """A first step, or a batch of another size or device (a new rollout): all rows start on the base."""
+        if (
+            self._switch is not None
+            and self._switch.batch_size == b
+            and self._switch.recovering.device == torch.device(device)
+        ):
             return
         if self._switch is not None:
             self.reset()
@@ -408,13 +426,26 @@ class OcrJointPolicy(PreTrainedPolicy):
         return score
 
     def _check_base_inputs(self, batch: dict[str, torch.Tensor]) -> None:
-        """At the first observation: does it hold every input of the base? (an env may differ from data)"""
-        if not self._base_inputs_checked:
-            missing = missing_inputs(self.base, batch)
-            if missing:
-                available = [k for k in batch if k.startswith("observation")]
-                raise KeyError(missing_inputs_message(missing, available, "the observation"))
-            self._base_inputs_checked = True
+        """At the first observation: does it hold every input of the base, shaped as the base was trained?
+        (An env or robot may differ from the dataset.)"""
+        if self._base_inputs_checked:
+            return
+        available = {k: v for k, v in batch.items() if k.startswith("observation") and hasattr(v, "shape")}
+        missing = missing_inputs(self.base, available, self._base_renames)
+        if missing:
+            raise KeyError(missing_inputs_message(missing, list(available), "the observation"))
+        renamed = {self._base_renames.get(k, k): v for k, v in available.items()}
+        wrong = [
+            f"{key}: {tuple(ft.shape)} vs {tuple(renamed[key].shape[-len(ft.shape) :])}"
+            for key, ft in self.base.config.input_features.items()
+            if tuple(renamed[key].shape[-len(ft.shape) :]) != tuple(ft.shape)
+        ]
+        if wrong:
+            raise ValueError(
+                f"The observation's features are shaped otherwise than the base was trained on (base vs "
+                f"observation): {wrong}. Check the env / robot settings (image size, state layout)."
+            )
+        self._base_inputs_checked = True
 
     def _mix(self, batch: dict[str, torch.Tensor], device: torch.device) -> torch.Tensor:
         """(B, A) actions: the base's for rows on the base, the current recovery action for the others."""
@@ -460,6 +491,8 @@ class OcrJointPolicy(PreTrainedPolicy):
         Call it once per observation: a queue-based base (diffusion, VQ-BeT) adds the observation to
         its history, as its `select_action` would. The switch's per-row state is not used.
         """
+        state = batch[self.config.state_key]
+        self._start_rows(1 if state.ndim == 1 else state.shape[0], state.device)
         obs = self._observe(batch)
         self._check_base_inputs(batch)
         ood = obs.recovery.is_ood.to(obs.frames.device)

@@ -104,6 +104,11 @@ def main(task: Task) -> None:
     overrides = f" Overrides: `--set {' '.join(args.set)}`." if args.set else ""
     env = f" Env: `--env {' '.join(args.env)}`." if args.env else ""
     protocol = (", eval " + " ".join(task.eval_overrides)) if task.eval_overrides else ""
+    if task.step_budget:
+        protocol += (
+            f"; {task.episode_length}-step episodes, success counted within {task.step_budget} steps "
+            f"(strict) and within {task.decision_budget} policy decisions (the reference's joint budget)"
+        )
     command = f".venv/bin/python benchmarks/{task.name}_ocr.py --profile {args.profile}"
     command += (" --set " + " ".join(args.set)) if args.set else ""
     command += (" --env " + " ".join(args.env)) if args.env else ""

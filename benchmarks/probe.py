@@ -6,7 +6,8 @@
         --baseline plain -- --policy.fixed_delay=11
 
 Runs the eval with the benchmarks' protocol (seeds 100000+i, batch 10, sync envs on CPU, the task's
-episode cap: `--env.episode_length=400` for Push-T), then adds the run to `benchmarks/results/probes.json`
+episode cap and both budgets: 960-step Push-T episodes, success within 400 steps and within 60 decisions),
+then adds the run to `benchmarks/results/probes.json`
 and rewrites the "Probes" section of `benchmarks/EXPERIMENTS.md` from it: one row per probe with its
 change, success rate and 95% interval, its baseline (an earlier probe by name, same seeds) and whether the
 change lies outside the baseline's interval, the only case in which it may be adopted. Arguments after
@@ -31,11 +32,14 @@ from lerobot_ocr.pipeline import BIN, EVAL_SEED, run  # noqa: E402
 
 LEDGER = HERE / "results" / "probes.json"
 EXPERIMENTS = HERE / "EXPERIMENTS.md"
-TASK_ARGS = {"pusht_ocr": ["--env.episode_length=400"], "square_ocr": ["--env.visualization_size=64"]}
+TASK_ARGS = {  # the pipelines' protocol: long episodes, success counted within both budgets
+    "pusht_ocr": ["--env.episode_length=960", "--ocr.step_budget=400", "--ocr.decision_budget=60"],
+    "square_ocr": ["--env.visualization_size=64", "--ocr.step_budget=400", "--ocr.decision_budget=30"],
+}
 
 
 def verdict(probe: dict, baseline: dict | None) -> str:
-    """ "outside" / "inside" the baseline's 95% interval, or "—" without a baseline."""
+    """ "outside" / "inside" the baseline's 95% interval (strict budget), or "—" without a baseline."""
     if baseline is None:
         return "—"
     lo, hi = baseline["ci95"]
@@ -47,18 +51,22 @@ def render(probes: list[dict]) -> str:
     lines = [
         "Written by `benchmarks/probe.py` from `benchmarks/results/probes.json`; newest last.",
         "",
-        "| date | name | checkpoint | change | region | success | 95% interval | episodes | baseline | "
-        "vs baseline |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| date | name | checkpoint | change | region | success | 95% interval | reference budget | episodes "
+        "| baseline | vs baseline |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for p in probes:
         base = by_name.get(p.get("baseline") or "")
         base_txt = f"{base['name']}: {base['success_rate']:.3g}" if base else "—"
         change = " ".join(f"`{a}`" for a in p["change"]) or "none"
+        ref = "—"
+        if "success_rate_reference_budget" in p:
+            lo, hi = p["ci95_reference_budget"]
+            ref = f"{p['success_rate_reference_budget']:.3g} [{lo:.2f}, {hi:.2f}]"
         lines.append(
             f"| {p['date']} | {p['name']} | `{p['checkpoint']}` | {change} | {p['region']} | "
-            f"{p['success_rate']:.3g} | [{p['ci95'][0]:.2f}, {p['ci95'][1]:.2f}] | {p['n_episodes']} | "
-            f"{base_txt} | {verdict(p, base)} |"
+            f"{p['success_rate']:.3g} | [{p['ci95'][0]:.2f}, {p['ci95'][1]:.2f}] | {ref} | "
+            f"{p['n_episodes']} | {base_txt} | {verdict(p, base)} |"
         )
     lines += [
         "",

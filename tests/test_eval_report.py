@@ -96,3 +96,29 @@ def test_episode_stats_stop_at_each_episode_end():
     )  # never handed back in its episode
     assert whole["ended_in_recovery"][0] is False and cut["ended_in_recovery"][0] is True
     assert cut["recovery_fraction"][1:] == whole["recovery_fraction"][1:] == [0.75, 0.5]  # rows that ran to T
+
+
+def test_both_budgets_from_one_long_run():
+    """Strict = success within the step budget; reference = within the decision budget (issue 21)."""
+    from lerobot_ocr.eval_report import decisions_at, success_steps
+
+    success = [[0, 0, 1, 0], [0, 0, 0, 0], [1, 0, 0, 0]]  # rows succeed at steps 3, never, 1
+    assert success_steps(success) == [3, -1, 1]
+    decisions = [[1, 1, 1], [0, 1, 0], [1, 1, 0], [0, 0, 0]]  # (T, B): new chunks per step
+    assert decisions_at([3, -1, 1], decisions) == [2, -1, 1]
+    assert decisions_at([17, 8, -1], None, action_steps=8) == [3, 1, -1]  # a base planning 8 actions a time
+    info = {
+        "per_task": [{"metrics": {"successes": [True, True, True, False]}}],
+        "overall": {"avg_max_reward": 0.9, "eval_s": 1.0},
+    }
+    # 4 episodes: success at steps 300 / 500 / 700 (decisions 40 / 55 / 70) and a failure
+    episodes = {"success_step": [300, 500, 700, -1], "decisions_at_success": [40, 55, 70, -1]}
+    row = summarize(info, None, {**episodes, "step_budget": 400, "decision_budget": 60})
+    assert row["success_rate"] == 0.25 and row["step_budget"] == 400  # strict: only the 300-step one
+    assert row["success_rate_reference_budget"] == 0.5 and row["decision_budget"] == 60
+    assert row["success_rate_episode"] == 0.75  # the whole (long) episode
+    assert row["ci95_reference_budget"][0] < 0.5 < row["ci95_reference_budget"][1]
+    table = format_table({"joint_ood": row})
+    assert "success (≤ 400 steps)" in table and "reference budget (≤ 60 decisions)" in table
+    assert "| joint_ood | 0.25 | [0.05, 0.70] | 0.50 [0.15, 0.85] | 4 |" in table
+    assert summarize(info, None, episodes)["success_rate"] == 0.75  # no budget given: the episode's

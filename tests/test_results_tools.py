@@ -30,10 +30,10 @@ def test_a_probe_is_adoptable_only_outside_its_baselines_interval():
     rows = [
         {**baseline, **common, "change": []},
         {**common, "name": "d11", "success_rate": 0.75, "ci95": [0.69, 0.80], "baseline": "plain",
-         "change": ["--policy.fixed_delay=11"]},
+         "change": ["--policy.fixed_delay=11"], "success_rate_reference_budget": 0.8,
+         "ci95_reference_budget": [0.74, 0.85]},
     ]  # fmt: skip
     text = probe.render(rows)
-    assert (
-        "| d11 | `c` | `--policy.fixed_delay=11` | ood | 0.75 | [0.69, 0.80] | 200 | plain: 0.64 | outside |"
-        in text
-    )
+    row = "| ood | 0.75 | [0.69, 0.80] | 0.8 [0.74, 0.85] | 200 | plain: 0.64 | outside |"
+    assert "| d11 | `c` | `--policy.fixed_delay=11` " + row in text
+    assert "| plain | `c` | none | ood | 0.64 | [0.57, 0.70] | — | 200 | — | — |" in text

@@ -39,6 +39,40 @@ def episode_steps(done) -> list[int]:
     return np.where(d.any(1), d.argmax(1) + 1, d.shape[1]).tolist()
 
 
+def success_steps(success) -> list[int]:
+    """(B, T) per-step success flags of a rollout -> per row, the steps up to its first success (-1: none)."""
+    s = np.asarray(success, dtype=bool)
+    return np.where(s.any(1), s.argmax(1) + 1, -1).tolist()
+
+
+def decisions_at(steps: list[int], decisions=None, action_steps: int | None = None) -> list[int]:
+    """Per row, the policy decisions taken up to its step `steps[b]` (-1 where the step is -1).
+
+    decisions: (T, B) bool, the row got a new chunk at that step (`ocr_joint`'s `ocr_stats()["decisions"]`);
+    else every `action_steps` steps is one decision (a chunking base policy; 1 = every step).
+    """
+    if decisions is not None:
+        counts = np.cumsum(np.asarray(decisions, dtype=int), axis=0)  # (T, B)
+        return [int(counts[n - 1, b]) if n > 0 else -1 for b, n in enumerate(steps)]
+    every = max(1, int(action_steps or 1))
+    return [-(-n // every) if n > 0 else -1 for n in steps]
+
+
+def budget_success(episodes: dict, n: int) -> dict:
+    """Success under the step budget (strict) and the decision budget (the reference's) of the first `n`
+    episodes of `episodes` = {"success_step", "decisions_at_success", "step_budget", "decision_budget"}."""
+    steps, decisions = episodes["success_step"][:n], episodes["decisions_at_success"][:n]
+    out = {}
+    for key, values, budget in (
+        ("strict", steps, episodes.get("step_budget")),
+        ("reference_budget", decisions, episodes.get("decision_budget")),
+    ):
+        if budget is not None:
+            k = sum(1 for v in values if 0 < v <= budget)
+            out[key] = {"successes": k, "budget": budget, "ci95": list(wilson_interval(k, n))}
+    return out
+
+
 def episode_modes(in_recovery, steps: list[int] | None = None) -> dict[str, list]:
     """(T, B) bool modes of one rollout (+ per-row episode steps; None = all T) -> per row: its fraction of
     steps in recovery, its first step on the base (-1: never handed back) and whether its last step
@@ -60,8 +94,13 @@ def _arg(args: list[str], name: str) -> str | None:
     return None
 
 
-def summarize(eval_info: dict, ocr: dict | None) -> dict:
-    """success_rate, n_episodes, 95% interval, rewards (+ recovery fraction) of one lerobot-eval run."""
+def summarize(eval_info: dict, ocr: dict | None, episodes: dict | None = None) -> dict:
+    """success_rate, n_episodes, 95% interval, rewards (+ recovery fraction) of one lerobot-eval run.
+
+    With `episodes` (`run_eval`'s episodes.json) and its budgets: `success_rate` counts successes within
+    the step budget (the strict protocol), `success_rate_reference_budget` those within the decision
+    budget (the reference's joint protocol), `success_rate_episode` those within the whole episode.
+    """
     successes = [bool(s) for task in eval_info["per_task"] for s in task["metrics"]["successes"]]
     n, k = len(successes), sum(successes)
     lo, hi = wilson_interval(k, n)
@@ -72,6 +111,18 @@ def summarize(eval_info: dict, ocr: dict | None) -> dict:
         "avg_max_reward": eval_info["overall"]["avg_max_reward"],
         "eval_s": eval_info["overall"].get("eval_s"),
     }
+    if episodes is not None and n and len(episodes["success_step"]) >= n:
+        budgets = budget_success(episodes, n)
+        if budgets:
+            out["success_rate_episode"], out["ci95_episode"] = out["success_rate"], out["ci95"]
+        if "strict" in budgets:
+            out["success_rate"] = budgets["strict"]["successes"] / n
+            out["ci95"] = budgets["strict"]["ci95"]
+            out["step_budget"] = budgets["strict"]["budget"]
+        if "reference_budget" in budgets:
+            out["success_rate_reference_budget"] = budgets["reference_budget"]["successes"] / n
+            out["ci95_reference_budget"] = budgets["reference_budget"]["ci95"]
+            out["decision_budget"] = budgets["reference_budget"]["budget"]
     if ocr is not None:
         out["mean_recovery_fraction"] = ocr["mean_recovery_fraction"]
         started = ocr.get("started_ood")
@@ -119,16 +170,37 @@ def format_start_split(rows: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
+OCR_FLAGS = ("step_budget", "decision_budget")  # `--ocr.<flag>=N`: ours, not passed to lerobot-eval
+
+
 def run_eval(args: list[str]) -> dict:
     """Run lerobot-eval with `args` (CLI strings) in this process; return `summarize(...)`.
 
+    Our own flags: `--ocr.step_budget=N` (success within N env steps: the strict protocol) and
+    `--ocr.decision_budget=N` (success within N policy decisions, each a base chunk or a recovery
+    chunk: the reference's joint protocol). Run the episodes long enough for both
+    (`--env.episode_length`); per-episode success steps and decisions go to `<output_dir>/episodes.json`.
+
     Raises:
-        ValueError: no `--output_dir=` among `args`.
+        ValueError: no `--output_dir=` among `args`, or an `--ocr.` flag that is not an integer >= 1.
     """
     from lerobot.scripts import lerobot_eval
 
     from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
 
+    budgets = {}
+    for flag in OCR_FLAGS:
+        value = _arg(args, f"ocr.{flag}")
+        if value is not None:
+            if not value.isdigit() or int(value) < 1:
+                raise ValueError(f"--ocr.{flag} must be an integer >= 1, got {value!r}.")
+            budgets[flag] = int(value)
+    unknown = [
+        a for a in args if a.startswith("--ocr.") and a.split("=")[0][len("--ocr.") :] not in OCR_FLAGS
+    ]
+    if unknown:
+        raise ValueError(f"Unknown flag(s) {unknown}; ours are {[f'--ocr.{f}' for f in OCR_FLAGS]}.")
+    args = [a for a in args if not a.startswith("--ocr.")]
     output_dir = _arg(args, "output_dir")
     if output_dir is None:
         raise ValueError("Pass --output_dir=… so that the results can be found.")
@@ -141,11 +213,16 @@ def run_eval(args: list[str]) -> dict:
         original_reset(self)
 
     dones: list[np.ndarray] = []  # (B, T) per rollout, to cut each row's stats at its episode's end
+    successes: list[np.ndarray] = []  # (B, T) per rollout: when each episode succeeded
+    chunk_steps: list[int | None] = []  # actions per decision of a (non-ocr_joint) chunking policy
     original_rollout = lerobot_eval.rollout
 
     def rollout(*a, **kw):
+        policy = kw.get("policy", a[1] if len(a) > 1 else None)
+        chunk_steps.append(getattr(getattr(policy, "config", None), "n_action_steps", None))
         data = original_rollout(*a, **kw)
         dones.append(data["done"].cpu().numpy())
+        successes.append(data["success"].cpu().numpy())
         return data
 
     OcrJointPolicy.reset = reset
@@ -160,6 +237,7 @@ def run_eval(args: list[str]) -> dict:
         lerobot_eval.rollout = original_rollout
     eval_info = json.loads((Path(output_dir) / "eval_info.json").read_text())
     ocr = None
+    batches = []
     if policies:
         batches = [*policies[-1].completed_stats, policies[-1].ocr_stats()]
         batches = [b for b in batches if b.get("steps")]
@@ -185,19 +263,39 @@ def run_eval(args: list[str]) -> dict:
             "ended_in_recovery": [m for e in episodes for m in e["ended_in_recovery"]],
         }
         (Path(output_dir) / "ocr_stats.json").write_text(json.dumps(ocr, indent=2))
-    return summarize(eval_info, ocr)
+    episodes = {"success_step": [], "decisions_at_success": [], **budgets}
+    joint = len(batches) == len(successes) and all(b.get("decisions") is not None for b in batches)
+    if policies and not joint:  # ocr_joint's decisions could not be matched to the rollouts
+        episodes.pop("decision_budget", None)
+    for i, success in enumerate(successes):  # rollouts in eval order, rows in env order
+        steps = success_steps(success)
+        decisions = batches[i]["decisions"] if joint else None
+        episodes["success_step"] += steps
+        episodes["decisions_at_success"] += decisions_at(steps, decisions, chunk_steps[i])
+    (Path(output_dir) / "episodes.json").write_text(json.dumps(episodes))
+    return summarize(eval_info, ocr, episodes)
 
 
 def format_table(rows: dict[str, dict]) -> str:
-    """Markdown table of named `summarize` results."""
+    """Markdown table of named `summarize` results: success within the step budget (or the episode), and
+    within the reference's decision budget where one was given."""
+    steps = {r.get("step_budget") for r in rows.values()} - {None}
+    decisions = {r.get("decision_budget") for r in rows.values()} - {None}
+    within = f" (≤ {'/'.join(map(str, sorted(steps)))} steps)" if steps else ""
+    reference = f" (≤ {'/'.join(map(str, sorted(decisions)))} decisions)" if decisions else ""
     lines = [
-        "| run | success | 95% interval | episodes | avg max reward | steps in recovery |",
-        "|---|---|---|---|---|---|",
+        f"| run | success{within} | 95% interval | reference budget{reference} | episodes | avg max reward "
+        "| steps in recovery |",
+        "|---|---|---|---|---|---|---|",
     ]
     for name, r in rows.items():
         rec = f"{100 * r['mean_recovery_fraction']:.0f}%" if "mean_recovery_fraction" in r else "—"
+        ref = "—"
+        if "success_rate_reference_budget" in r:
+            lo, hi = r["ci95_reference_budget"]
+            ref = f"{r['success_rate_reference_budget']:.2f} [{lo:.2f}, {hi:.2f}]"
         lines.append(
-            f"| {name} | {r['success_rate']:.2f} | [{r['ci95'][0]:.2f}, {r['ci95'][1]:.2f}] | "
+            f"| {name} | {r['success_rate']:.2f} | [{r['ci95'][0]:.2f}, {r['ci95'][1]:.2f}] | {ref} | "
             f"{r['n_episodes']} | {r['avg_max_reward']:.2f} | {rec} |"
         )
     return "\n".join(lines)

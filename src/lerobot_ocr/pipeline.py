@@ -48,7 +48,10 @@ class Task:
     lowdim_description: str
     lowdim_generate_args: tuple[str, ...] = ()  # `lerobot-ocr generate` flags that skip the cameras
     image_args: tuple[str, ...] = ()  # extra base training args for an image base
-    eval_overrides: tuple[str, ...] = ()  # extra lerobot-eval args of every cell (the paper's protocol)
+    eval_overrides: tuple[str, ...] = ()  # extra lerobot-eval args of every cell
+    step_budget: int | None = None  # success within this many env steps: the strict protocol
+    decision_budget: int | None = None  # within this many policy decisions: the reference's joint protocol
+    episode_length: int | None = None  # each cell's episode cap, long enough for both budgets
     pictures: Callable[..., list[Path]] | None = None  # (chain, out, env_args) -> files
 
     def generate_args(self, p: dict, root: Path, env_args: list[str]) -> list[str]:
@@ -195,6 +198,9 @@ def eval_args(
         # CPU: one process; async workers would each spend ~10 s importing LeRobot on a 2-core machine.
         f"--eval.use_async_envs={'true' if p['device'] != 'cpu' else 'false'}",
         *task.eval_overrides,
+        *([f"--env.episode_length={task.episode_length}"] if task.episode_length else []),
+        *([f"--ocr.step_budget={task.step_budget}"] if task.step_budget else []),
+        *([f"--ocr.decision_budget={task.decision_budget}"] if task.decision_budget else []),
         *env_args,
     ]
 
@@ -295,12 +301,11 @@ def run_chain(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> Chai
             shutil.rmtree(out, ignore_errors=True)
             run(eval_args(task, ckpt, region, p, out, env_args), logs / f"eval_{name}.log")
             info = json.loads((out / "eval_info.json").read_text())
-            ocr = (
-                json.loads((out / "ocr_stats.json").read_text())
-                if (out / "ocr_stats.json").exists()
-                else None
+            ocr, episodes = (
+                json.loads((out / name).read_text()) if (out / name).exists() else None
+                for name in ("ocr_stats.json", "episodes.json")
             )
-            return summarize(info, ocr)
+            return summarize(info, ocr, episodes)
 
         results[name] = stage(f"eval_{name}", evaluate)
     return Chain(results, eval_dirs, base_ckpt, ocr_ckpt, converted, stage.times)
@@ -438,9 +443,11 @@ PUSHT = Task(
     lowdim_description="low-dim base (agent xy + 8 T corners)",
     image_args=("--policy.crop_shape=[84,84]",),
     pictures=_pusht_pictures,
-    eval_overrides=(
-        "--env.episode_length=400",
-    ),  # the reference's base eval caps Push-T at 400 steps (env default 300)
+    # The reference caps its base eval at 400 steps and its joint eval at 60 policy calls (no step cap):
+    # every cell runs 960 steps (60 decisions of at most 16 steps) and reports both budgets.
+    step_budget=400,
+    decision_budget=60,
+    episode_length=960,
     profiles={
         # `lerobot-ocr demo`: the whole chain in minutes; the effect shows in reward, not yet in success
         "demo": {
@@ -511,6 +518,10 @@ SQUARE = Task(
     paper="Paper (low-dim base, 200 demos): base ID 0.87, base OOD 0.00, joint OOD 0.80.",
     lowdim_description="low-dim base (eef xyz + rot6d + fingers, nut xyz + rot6d + eef-nut)",
     pictures=_square_pictures,
+    # The reference's Square joint eval: 30 policy calls; ours at most 12 steps each, within 400 steps.
+    step_budget=400,
+    decision_budget=30,
+    episode_length=400,
     profiles={
         "cpu": {
             "demos": 200,

@@ -333,6 +333,9 @@ class OcrJointPolicy(PreTrainedPolicy):
             self.completed_stats.append(self.ocr_stats())
         self._scores: list[torch.Tensor] = []
         self._modes: list[torch.Tensor] = []
+        self._decisions: list[
+            torch.Tensor
+        ] = []  # per step, (B,) bool: the row got a new chunk (base or recovery)
         self._n_chunks = self._n_handbacks = 0
 
     def _start_rows(self, b: int, device: torch.device) -> None:
@@ -413,6 +416,7 @@ class OcrJointPolicy(PreTrainedPolicy):
     def _decide(self, obs: Observed | None, noise: torch.Tensor | None, device) -> torch.Tensor:
         """Switch the rows, plan the chunks they need, hand back; return the (B,) scores (NaN: unchecked)."""
         if obs is None:  # every row on the base, inside its chunk: nothing to decide
+            self._new_chunks = None
             return self._unchecked
         score = obs.recovery.score.to(device)
         decision = decide(score, float(self.manifold.threshold_), self._switch)
@@ -421,6 +425,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         if bool(decision.hand_back.any()):
             drop_queued_actions(self.base)  # its queue was planned before or during the recovery
         self._switch = advance(self._switch, decision, self._chunk.shape[1])
+        self._new_chunks = decision.needs_chunk
         self._n_chunks += int(decision.needs_chunk.sum())
         self._n_handbacks += int(decision.hand_back.sum())
         return score
@@ -453,12 +458,18 @@ class OcrJointPolicy(PreTrainedPolicy):
         n_recovering = self._switch.n_recovering
         self._check_base_inputs(batch)
         base_batch = self._base_pre(dict(batch))
+        base_plans = False
         if n_recovering == len(recovering):
             observe_only(self.base, base_batch)  # history stays right; nothing planned for nobody
             drop_queued_actions(self.base)
             action = torch.zeros(self._chunk.shape[0], self._chunk.shape[2], device=device)
         else:
+            base_plans = not queued_actions(self.base)  # its queue is empty (or unknown): it plans now
             action = self._base_post(self.base.select_action(base_batch)).to(device, torch.float32)
+        decided = (~recovering).cpu() & base_plans
+        if self._new_chunks is not None:
+            decided = decided | self._new_chunks.cpu()
+        self._decisions.append(decided)
         if n_recovering:
             step = self._chunk.shape[1] - 1 - self._switch.actions_left
             action[recovering] = self._chunk[recovering, step[recovering]]
@@ -523,6 +534,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             "handbacks": self._n_handbacks,
             "score": scores,
             "in_recovery": modes,
+            "decisions": torch.stack(self._decisions).numpy() if self._decisions else None,
         }
 
     # ------------------------------------------------------------------------------ save / load

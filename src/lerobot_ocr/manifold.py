@@ -23,7 +23,7 @@ from __future__ import annotations
 import json
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Literal
 
@@ -71,6 +71,10 @@ class RecoveryOutput:
     log_density: torch.Tensor
     score: torch.Tensor
     is_ood: torch.Tensor
+
+    def rows(self, index: torch.Tensor) -> RecoveryOutput:
+        """The same output for the rows `index` (a (B,) bool mask or (R,) indices) only."""
+        return RecoveryOutput(*(getattr(self, f.name)[index] for f in fields(self)))
 
 
 class KeypointManifold(nn.Module):

@@ -159,6 +159,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             d_max=config.d_max,
             normalize=True,
             fixed_delay=config.fixed_delay,
+            rigid=config.plan == "rigid",
         )
 
         bundled = Path(bundle_dir) / BASE_DIR if bundle_dir is not None else None
@@ -416,25 +417,31 @@ class OcrJointPolicy(PreTrainedPolicy):
         frames: torch.Tensor,
         keypoints: torch.Tensor,
         state: torch.Tensor,
-        vector: torch.Tensor | None = None,
+        recovery: RecoveryOutput | None = None,
         noise: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """One recovery chunk per row: world actions (R, L, A) and the keypoint plan (R, L, K, D).
 
         frames (R, D+1, D+1) object poses, keypoints (R, K, D), state (R, S), world frame;
-        vector: (R, D) recovery vectors (None: computed from the manifold); noise: the inverse
+        recovery: the manifold's verdict on these R rows (None: computed here); noise: the inverse
         policy's initial noise (None: sampled).
         """
-        if vector is None:
-            vector = self.manifold.recovery(keypoints.double(), magnitude=self.config.magnitude).vector
-        plan = self.planner(keypoints, vector.to(keypoints.dtype), self._distance(state, keypoints))
+        if recovery is None:
+            recovery = self.manifold.recovery(keypoints.double(), magnitude=self.config.magnitude)
+        plan = self.planner(
+            keypoints,
+            recovery.vector.to(keypoints.dtype),
+            self._distance(state, keypoints),
+            per_keypoint=recovery.per_keypoint.to(keypoints.dtype),
+        )
         return self.inverse.sample(plan, state, frames, noise=noise), plan
 
     def _plan_chunks(self, obs: Observed, rows: torch.Tensor, noise: torch.Tensor | None) -> None:
         """Fill the chunk of the rows in the (B,) mask `rows` with the first n recovery actions."""
         idx = rows.nonzero().squeeze(-1)
+        recovery = obs.recovery.rows(idx)
         actions, _ = self.recovery_actions(
-            obs.frames[idx], obs.keypoints[idx], obs.state[idx], obs.recovery.vector[idx], noise=noise
+            obs.frames[idx], obs.keypoints[idx], obs.state[idx], recovery, noise=noise
         )
         self._chunk[idx] = actions[:, : self._chunk.shape[1]].to(self._chunk)
 
@@ -551,9 +558,8 @@ class OcrJointPolicy(PreTrainedPolicy):
         n = min(self.config.n_recovery_action_steps, base_chunk.shape[1])
         out = base_chunk[:, :n].to(obs.frames.device, torch.float32).clone()
         if bool(ood.any()):
-            actions, _ = self.recovery_actions(
-                obs.frames[ood], obs.keypoints[ood], obs.state[ood], obs.recovery.vector[ood]
-            )
+            recovery = obs.recovery.rows(ood)
+            actions, _ = self.recovery_actions(obs.frames[ood], obs.keypoints[ood], obs.state[ood], recovery)
             out[ood] = actions[:, :n].to(out.dtype)
         return out
 

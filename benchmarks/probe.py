@@ -119,8 +119,11 @@ def main() -> None:
     run(cmd, out.with_suffix(".log"))
     from lerobot_ocr.eval_report import summarize
 
-    ocr = json.loads((out / "ocr_stats.json").read_text()) if (out / "ocr_stats.json").exists() else None
-    result = summarize(json.loads((out / "eval_info.json").read_text()), ocr)
+    ocr, episodes = (
+        json.loads((out / name).read_text()) if (out / name).exists() else None
+        for name in ("ocr_stats.json", "episodes.json")
+    )
+    result = summarize(json.loads((out / "eval_info.json").read_text()), ocr, episodes)
     probes.append(
         {
             "name": args.name,

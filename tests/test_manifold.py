@@ -119,6 +119,9 @@ def test_an_ood_set_with_no_keypoint_deficit_gets_the_paper_direction(data):
     m = KeypointManifold(n_components=3, random_state=0).fit(data)
     x = torch.from_numpy(data[:4])
     assert (m.recovery(x).vector.norm(dim=-1) < 1e-9).all()  # in the data: no recovery
+    deeper = m.recovery(x, deeper=True)  # a recovery that goes on inside the data still has a direction
+    assert (deeper.vector.norm(dim=-1) > 0).all() and not deeper.is_ood.any()
+    torch.testing.assert_close(deeper.vector, m.recovery(x, magnitude="paper").vector)
     m.set_threshold(1e9)  # now every set is OOD, while the per-keypoint thresholds stay calibrated
     out, paper = m.recovery(x), m.recovery(x, magnitude="paper")
     assert out.is_ood.all() and (out.vector.norm(dim=-1) > 0).all()

@@ -119,6 +119,8 @@ def summarize(eval_info: dict, ocr: dict | None, episodes: dict | None = None) -
             out["success_rate"] = budgets["strict"]["successes"] / n
             out["ci95"] = budgets["strict"]["ci95"]
             out["step_budget"] = budgets["strict"]["budget"]
+            # everything below (the start split) counts the same successes as the headline
+            successes = [0 < step <= budgets["strict"]["budget"] for step in episodes["success_step"][:n]]
         if "reference_budget" in budgets:
             out["success_rate_reference_budget"] = budgets["reference_budget"]["successes"] / n
             out["ci95_reference_budget"] = budgets["reference_budget"]["ci95"]
@@ -264,7 +266,10 @@ def run_eval(args: list[str]) -> dict:
         }
         (Path(output_dir) / "ocr_stats.json").write_text(json.dumps(ocr, indent=2))
     episodes = {"success_step": [], "decisions_at_success": [], **budgets}
-    joint = len(batches) == len(successes) and all(b.get("decisions") is not None for b in batches)
+    joint = len(batches) == len(successes) and all(
+        b.get("decisions") is not None and b["decisions"].shape == s.shape[::-1]
+        for b, s in zip(batches, successes)
+    )
     if policies and not joint:  # ocr_joint's decisions could not be matched to the rollouts
         episodes.pop("decision_budget", None)
     for i, success in enumerate(successes):  # rollouts in eval order, rows in env order

@@ -420,8 +420,12 @@ class KeypointManifold(nn.Module):
         phi: float = 5500.0,
         eta: float = 1100.0,
         temperature: float = 2.0,
+        deeper: bool = False,
     ) -> RecoveryOutput:
         """Recovery vectors toward the data for (..., K, D) keypoints, in one vectorised pass.
+
+        deeper: also give in-distribution sets a direction (where "log_deficit" is zero there, the
+        "paper" magnitude's), for recoveries that go on inside the data (`handback_quantile`).
 
         Per keypoint, delta_k = m_k * u_k with u_k the unit gradient of log p_k (zero where the
         gradient is exactly zero). The magnitude m_k is:
@@ -457,7 +461,7 @@ class KeypointManifold(nn.Module):
                 raise NotFittedError("The 'log_deficit' magnitude needs calibrate(keypoints) first.")
             mag = torch.tanh(torch.clamp(self.keypoint_log_thresholds_ - log_p, min=0.0) / temperature)
             per_kp = mag.unsqueeze(-1) * unit
-            weak = is_ood & (torch.linalg.vector_norm(per_kp.mean(-2), dim=-1) < 1e-9)
+            weak = (is_ood | deeper) & (torch.linalg.vector_norm(per_kp.mean(-2), dim=-1) < 1e-9)
             per_kp = torch.where(weak[..., None, None], paper, per_kp)
         return RecoveryOutput(per_kp.mean(-2), per_kp, log_p, score, is_ood)
 

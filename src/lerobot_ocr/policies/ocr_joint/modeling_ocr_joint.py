@@ -198,11 +198,14 @@ class OcrJointPolicy(PreTrainedPolicy):
             if not config.pretrained_path:
                 self._fit_from_table()
         # Training: an exponential moving average of the inverse policy (`ema_power`), updated by `update()`.
-        self._ema = (
+        ema = (
             ema_model(self.inverse, config.ema_power)
             if dataset_meta is not None and config.ema_power
             else None
         )
+        self._ema_holder = [
+            ema
+        ]  # a list: not a submodule, so its copy stays out of parameters() and state_dict()
         self.completed_stats: list[dict] = []
         self.reset()
 
@@ -224,8 +227,10 @@ class OcrJointPolicy(PreTrainedPolicy):
 
     def update(self) -> None:
         """After each optimizer step (lerobot-train calls it): update the inverse policy's moving average."""
-        if self._ema is not None:
-            self._ema.update_parameters(self.inverse)
+        ema = self._ema_holder[0]
+        if ema is not None:
+            ema.to(next(self.inverse.parameters()).device)  # follows the policy to its device
+            ema.update_parameters(self.inverse)
 
     # ------------------------------------------------------------------------------ training data
     def _load_training_table(self, root: str | Path) -> None:
@@ -297,7 +302,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         self.apply_threshold()
         n = len(self._tbl_index)
         gen = torch.Generator().manual_seed(0)
-        sample = self._tbl_keypoints[torch.randperm(n, generator=gen)[:5000]].double()
+        sample = self._tbl_keypoints[torch.randperm(n, generator=gen)[:1000]].double()
         position = self.manifold.best_score_over_rotations(sample, self.rotations_)
         self.position_quantiles_.copy_(
             torch.quantile(position, torch.linspace(0, 1, 101, dtype=torch.float64))
@@ -401,7 +406,12 @@ class OcrJointPolicy(PreTrainedPolicy):
             state, cfg.state_key, "The robot state is missing or invalid; check the robot's readings."
         )
         return Observed(
-            frames, keypoints, state, self.manifold.recovery(keypoints.double(), magnitude=cfg.magnitude)
+            frames,
+            keypoints,
+            state,
+            self.manifold.recovery(
+                keypoints.double(), magnitude=cfg.magnitude, deeper=cfg.handback_quantile is not None
+            ),
         )
 
     def _distance(self, state: torch.Tensor, keypoints: torch.Tensor) -> torch.Tensor:
@@ -427,7 +437,11 @@ class OcrJointPolicy(PreTrainedPolicy):
         policy's initial noise (None: sampled).
         """
         if recovery is None:
-            recovery = self.manifold.recovery(keypoints.double(), magnitude=self.config.magnitude)
+            recovery = self.manifold.recovery(
+                keypoints.double(),
+                magnitude=self.config.magnitude,
+                deeper=self.config.handback_quantile is not None,
+            )
         plan = self.planner(
             keypoints,
             recovery.vector.to(keypoints.dtype),
@@ -554,6 +568,9 @@ class OcrJointPolicy(PreTrainedPolicy):
         obs = self._observe(batch)
         self._check_base_inputs(batch)
         ood = obs.recovery.is_ood.to(obs.frames.device)
+        deep = self._deep(obs)
+        if deep is not None:  # as select_action: an object deep in the data is the base's, whatever its turn
+            ood = ood & ~deep.to(ood.device)
         base_chunk = self._base_post(predict_chunk(self.base, self._base_pre(dict(batch))))
         n = min(self.config.n_recovery_action_steps, base_chunk.shape[1])
         out = base_chunk[:, :n].to(obs.frames.device, torch.float32).clone()
@@ -592,11 +609,10 @@ class OcrJointPolicy(PreTrainedPolicy):
         save_directory = Path(save_directory)
         self.config._save_pretrained(save_directory)
         sd = state_dict if state_dict is not None else self.state_dict()
-        own = {k: v.contiguous() for k, v in sd.items() if not k.startswith((f"{BASE_DIR}.", "_ema."))}
-        if self._ema is not None:  # the checkpoint holds the averaged inverse policy
-            own.update(
-                {f"inverse.{k}": v.detach().contiguous() for k, v in self._ema.module.state_dict().items()}
-            )
+        own = {k: v.contiguous() for k, v in sd.items() if not k.startswith(f"{BASE_DIR}.")}
+        ema = self._ema_holder[0]
+        if ema is not None and int(ema.n_averaged) > 0:  # the checkpoint holds the averaged inverse policy
+            own.update({f"inverse.{k}": v.detach().contiguous() for k, v in ema.module.state_dict().items()})
         total = sum(t.numel() * t.element_size() for t in own.values())
         save_torch_state_dict(own, str(save_directory), max_shard_size=max(total, 1))
         (save_directory / KEYPOINTS_FILE).write_text(json.dumps(self.object_keypoints_.tolist()))

@@ -312,12 +312,3 @@ def test_a_misrotated_object_in_the_demos_place_is_left_to_the_base_with_a_handb
     joint.reset()
     with pytest.raises(ValueError, match="handback_quantile needs the position calibration"):
         joint.select_action(observation([OOD_POSE]))
-
-
-def test_a_rigid_plan_runs_in_the_policy(diffusion_base, converted_dataset):
-    joint = make_joint(diffusion_base, converted_dataset, plan="rigid", n_recovery_action_steps=2)
-    joint.reset()
-    action = joint.select_action(observation([OOD_POSE]))
-    assert torch.isfinite(action).all() and joint.ocr_stats()["recovery_chunks"] == 1
-    with pytest.raises(ValueError, match="plan must be 'translation' or 'rigid'"):
-        make_joint(diffusion_base, converted_dataset, plan="se3")

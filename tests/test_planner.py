@@ -75,25 +75,3 @@ def test_fixed_delay_ignores_the_distance():
     torch.testing.assert_close(traj[1, -1, 0], torch.tensor([0.0, 4.0]))
     with pytest.raises(ValueError, match="fixed_delay"):
         RecoveryPlanner(horizon=8, fixed_delay=8)
-
-
-def test_rigid_plans_turn_the_object_and_stay_rigid():
-    """plan_rigid_trajectory: vectors that agree give the translation; vectors about the centre, a turn."""
-    from lerobot_ocr.planner import plan_rigid_trajectory
-
-    kps = torch.tensor([[[0.0, 0.0], [10.0, 0.0], [0.0, 20.0]]], dtype=torch.float64)
-    same = torch.tensor([[[1.0, 0.0]] * 3], dtype=torch.float64)
-    moved = plan_rigid_trajectory(kps, same, step_size=2.0, horizon=8, delay=5)
-    torch.testing.assert_close(moved, plan_keypoint_trajectory(kps, same[:, 0], 2.0, 8, delay=5))
-    centre = kps.mean(1, keepdim=True)
-    tangent = torch.stack((-(kps - centre)[..., 1], (kps - centre)[..., 0]), dim=-1)  # turn counter-clockwise
-    turned = plan_rigid_trajectory(kps, tangent, step_size=1.0, horizon=8)
-    dist = torch.cdist(turned[0], turned[0])
-    torch.testing.assert_close(dist, dist[:1].expand_as(dist))  # every frame a rigid image of frame 0
-    torch.testing.assert_close(turned[0, :, :].mean(1), centre[0].expand(8, 2))  # turns about its centre
-    angle = torch.atan2(*(turned[0, -1, 1] - turned[0, -1, 0]).flip(0)) - torch.atan2(
-        *(kps[0, 1] - kps[0, 0]).flip(0)
-    )
-    assert angle > 0.2  # 7 moving frames of about 1 unit per keypoint: a clear counter-clockwise turn
-    with pytest.raises(ValueError, match="per-keypoint recovery vectors"):
-        RecoveryPlanner(rigid=True)(kps, same[:, 0], torch.zeros(1))

@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import torch
 
-from lerobot_ocr.geometry import fit_rigid_transform, transform_points
 from lerobot_ocr.validation import check_finite, check_trailing_shape
 
 
@@ -87,58 +86,6 @@ def plan_keypoint_trajectory(
     ).unsqueeze(1)
 
 
-def plan_rigid_trajectory(
-    keypoints: torch.Tensor,
-    per_keypoint_vectors: torch.Tensor,
-    step_size: float,
-    horizon: int,
-    delay: torch.Tensor | int = 0,
-) -> torch.Tensor:
-    """A rigid keypoint trajectory that turns the object as well as moving it (beyond the paper).
-
-    The rigid motion T that best carries each keypoint along its own recovery vector (least squares,
-    `geometry.fit_rigid_transform`), scaled so the keypoints move `step_size` per frame on average, is
-    applied once per moving frame: frame t = T^max(0, t - df) . rho. With vectors that agree it is the
-    paper's translation; where they turn about the object, the plan turns it toward the orientations
-    the demonstrations hold.
-
-    Args:
-        keypoints: (B, K, D) current world keypoints rho, K >= D.
-        per_keypoint_vectors: (B, K, D) recovery vectors delta_k (e.g. `RecoveryOutput.per_keypoint`).
-        step_size: alpha, mean keypoint displacement per moving frame.
-        horizon: L; delay: (B,) or scalar df, as `plan_keypoint_trajectory`.
-    Returns:
-        (B, L, K, D) trajectory; frame 0 equals `keypoints`; every frame is a rigid image of it.
-    Raises:
-        ValueError: shapes that do not match, fewer than D keypoints, or NaN/inf.
-    """
-    if keypoints.ndim != 3 or per_keypoint_vectors.shape != keypoints.shape:
-        raise ValueError(
-            f"Need keypoints (B, K, D) and per-keypoint vectors of the same shape, got "
-            f"{tuple(keypoints.shape)} and {tuple(per_keypoint_vectors.shape)}."
-        )
-    check_finite(keypoints, "keypoints")
-    check_finite(per_keypoint_vectors, "per_keypoint_vectors")
-    b, _, d = keypoints.shape
-    x = keypoints.to(torch.float64)
-    mean_norm = torch.linalg.vector_norm(per_keypoint_vectors.to(torch.float64), dim=-1).mean(-1)  # (B,)
-    scale = step_size / mean_norm.clamp_min(torch.finfo(torch.float64).tiny)
-    target = x + per_keypoint_vectors.to(torch.float64) * scale[:, None, None]
-    step = fit_rigid_transform(x, target)  # (B, D+1, D+1): one frame's motion
-    eye = torch.eye(d + 1, dtype=step.dtype, device=x.device)
-    step = torch.where((mean_norm > 0)[:, None, None], step, eye.expand_as(step))  # no vector: no motion
-    t = torch.arange(horizon, device=x.device).unsqueeze(0)
-    delay_t = torch.as_tensor(delay, device=x.device).reshape(-1, 1).to(torch.long)
-    moves = torch.clamp(t - delay_t, min=0).expand(b, horizon)  # (B, L) moving frames so far
-    powers = [eye.expand(b, d + 1, d + 1)]
-    for _ in range(int(moves.max())):
-        powers.append(step @ powers[-1])
-    stacked = torch.stack(powers, dim=1)  # (B, M+1, D+1, D+1)
-    frames = torch.take_along_dim(stacked, moves[:, :, None, None], dim=1)  # (B, L, D+1, D+1)
-    out = transform_points(frames, x.unsqueeze(1).expand(b, horizon, *x.shape[1:]))
-    return out.to(keypoints.dtype)
-
-
 @dataclass
 class RecoveryPlanner:
     """The paper's planner with its parameters (alpha, L, d_min, d_max) bundled.
@@ -150,8 +97,6 @@ class RecoveryPlanner:
     fixed_delay: hold the keypoints still for this many frames whatever the distance, instead of
         the d_min/d_max ramp (the reference's Push-T eval: 12 of 16, so the robot first gets round
         the object and the plan asks for a short push); None = the ramp.
-    rigid: plan a rigid motion from the per-keypoint vectors (`plan_rigid_trajectory`: the object
-        also turns) instead of the paper's translation by their mean.
 
     Raises:
         ValueError: fixed_delay outside [0, horizon), or d_max <= d_min (when called).
@@ -163,30 +108,16 @@ class RecoveryPlanner:
     d_max: float = 1.0
     normalize: bool = True
     fixed_delay: int | None = None
-    rigid: bool = False
 
     def __post_init__(self):
         if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:
             raise ValueError(f"fixed_delay must be in [0, horizon={self.horizon}), got {self.fixed_delay}.")
 
     def __call__(
-        self,
-        keypoints: torch.Tensor,
-        recovery_vector: torch.Tensor,
-        distance: torch.Tensor,
-        per_keypoint: torch.Tensor | None = None,
+        self, keypoints: torch.Tensor, recovery_vector: torch.Tensor, distance: torch.Tensor
     ) -> torch.Tensor:
         """(B, K, D) world keypoints, (B, D) or (B, K, D) recovery vectors, (B,) end-effector-to-object
-        distances -> (B, L, K, D) keypoint plan whose frame 0 is `keypoints`.
-
-        per_keypoint: (B, K, D) per-keypoint recovery vectors, used by a `rigid` planner.
-        Raises:
-            ValueError: a `rigid` planner without `per_keypoint`; bad shapes or NaN (see the plan functions).
-        """
-        if self.rigid and per_keypoint is None:
-            raise ValueError(
-                "A rigid RecoveryPlanner needs the per-keypoint recovery vectors (per_keypoint=)."
-            )
+        distances -> (B, L, K, D) keypoint plan whose frame 0 is `keypoints`."""
         vec = recovery_vector
         if self.normalize:
             norm = torch.linalg.vector_norm(vec, dim=-1, keepdim=True)
@@ -197,6 +128,4 @@ class RecoveryPlanner:
             delay = torch.full(
                 (keypoints.shape[0],), self.fixed_delay, dtype=torch.long, device=keypoints.device
             )
-        if self.rigid:
-            return plan_rigid_trajectory(keypoints, per_keypoint, self.step_size, self.horizon, delay)
         return plan_keypoint_trajectory(keypoints, vec, self.step_size, self.horizon, delay)

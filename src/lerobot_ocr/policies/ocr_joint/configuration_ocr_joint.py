@@ -63,8 +63,6 @@ class OcrJointConfig(PreTrainedConfig):
             effector is d_max or farther from the object, for 0 at d_min or closer. Defaults 15, 60.
         fixed_delay: frames the plan holds still whatever the distance (replaces the ramp; the
             reference's Push-T eval uses 12 of 16). Default None.
-        plan: "translation" (default, the paper's: all keypoints move by their mean recovery vector) or
-            "rigid" (the rigid motion that best follows each keypoint's vector: the object turns too).
         n_recovery_action_steps: recovery actions executed per chunk before the row decides again.
             Default 8.
         ema_power: train the inverse policy with an exponential moving average of its weights, decay
@@ -104,7 +102,6 @@ class OcrJointConfig(PreTrainedConfig):
     d_min: float = 15.0
     d_max: float = 60.0
     fixed_delay: int | None = None
-    plan: str = "translation"
     n_recovery_action_steps: int = 8
     ema_power: float | None = None
 
@@ -162,8 +159,6 @@ class OcrJointConfig(PreTrainedConfig):
             raise ValueError(
                 f"--policy.handback_quantile must be in (0, 1) or None, got {self.handback_quantile}."
             )
-        if self.plan not in ("translation", "rigid"):
-            raise ValueError(f"--policy.plan must be 'translation' or 'rigid', got {self.plan!r}.")
         if self.ema_power is not None and not self.ema_power > 0:
             raise ValueError(f"--policy.ema_power must be > 0 or None, got {self.ema_power}.")
         if not self.reg_covar > 0:

@@ -159,7 +159,6 @@ class OcrJointPolicy(PreTrainedPolicy):
             d_max=config.d_max,
             normalize=True,
             fixed_delay=config.fixed_delay,
-            rigid=config.plan == "rigid",
         )
 
         bundled = Path(bundle_dir) / BASE_DIR if bundle_dir is not None else None
@@ -442,12 +441,7 @@ class OcrJointPolicy(PreTrainedPolicy):
                 magnitude=self.config.magnitude,
                 deeper=self.config.handback_quantile is not None,
             )
-        plan = self.planner(
-            keypoints,
-            recovery.vector.to(keypoints.dtype),
-            self._distance(state, keypoints),
-            per_keypoint=recovery.per_keypoint.to(keypoints.dtype),
-        )
+        plan = self.planner(keypoints, recovery.vector.to(keypoints.dtype), self._distance(state, keypoints))
         return self.inverse.sample(plan, state, frames, noise=noise), plan
 
     def _plan_chunks(self, obs: Observed, rows: torch.Tensor, noise: torch.Tensor | None) -> None:

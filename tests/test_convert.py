@@ -137,4 +137,4 @@ def test_cli_convert_and_push(pusht_dataset, tmp_path, monkeypatch):
         ]
     )
     assert rc == 0 and (out / "meta" / "info.json").exists()
-    assert pushed == [("me/pusht_ocr_kp", {"private": False})]
+    assert pushed == [("me/pusht_ocr_kp", {"private": False, "tags": ["lerobot-ocr"]})]

@@ -6,6 +6,7 @@ import argparse
 import json
 import logging
 import sys
+from pathlib import Path
 
 TORCHCODEC_NOTE = (
     "torchcodec cannot be loaded ({reason}); LeRobot decodes videos with pyav instead. Without FFmpeg 4-8 "
@@ -147,6 +148,52 @@ def _eval(args: argparse.Namespace) -> int:
     return 0
 
 
+def _collect(argv: list[str]) -> int:
+    from lerobot_ocr.continual.collect import main as collect_main
+
+    ds = collect_main(argv)
+    print(
+        f"Wrote {ds.meta.total_episodes} episodes / {ds.meta.total_frames} frames to {ds.root} "
+        f"(repo_id {ds.repo_id})."
+    )
+    return 0
+
+
+def _merge(args: argparse.Namespace) -> int:
+    from lerobot_ocr.continual.merge import merge
+
+    sources = [(root, f"local/{Path(root).name}") for root in [args.base, *args.add]]
+    ds = merge(
+        sources,
+        args.output_root,
+        args.output_repo_id or f"local/{Path(args.output_root).name}",
+        push_to_hub=args.push_to_hub,
+        private=args.private,
+        overwrite=args.overwrite,
+    )
+    print(
+        f"Wrote {ds.meta.total_episodes} episodes / {ds.meta.total_frames} frames to {args.output_root} "
+        f"(repo_id {ds.repo_id}); provenance in meta/ocr_continual.json."
+    )
+    return 0
+
+
+def _rebase(args: argparse.Namespace) -> int:
+    from lerobot_ocr.continual.rebase import rebase
+
+    out = rebase(args.policy_path, args.base_path, args.output_dir, overwrite=args.overwrite)
+    print(f"Wrote {out}: the ocr_joint checkpoint with {args.base_path} as its base (--policy.path={out}).")
+    return 0
+
+
+def _push(args: argparse.Namespace) -> int:
+    from lerobot_ocr.hub import push_folder
+
+    push_folder(args.root, args.repo_id, private=args.private)
+    print(f"Pushed {args.root} to the hub as {args.repo_id}.")
+    return 0
+
+
 def _add_hub_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--push-to-hub",
@@ -265,6 +312,49 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ev.add_argument("lerobot_eval_args", nargs="*", help="Arguments for lerobot-eval, incl. --output_dir=…")
     ev.set_defaults(func=_eval)
+
+    sub.add_parser(
+        "collect",
+        help="Run a policy (ocr_joint for OCR collection) in a sim env and keep its episodes as a "
+        "LeRobotDataset with the features of --like=<the base's dataset> (lerobot-eval's flags plus "
+        "--like, --root, --repo_id, --episodes, --keep=episode|recovery|all, --push_to_hub, --overwrite).",
+        add_help=False,
+    )
+
+    mrg = sub.add_parser(
+        "merge",
+        help="Merge the base's dataset with collected ones (LeRobot's merge_datasets), with provenance.",
+    )
+    mrg.add_argument("--base", required=True, help="Folder of the base's training dataset.")
+    mrg.add_argument(
+        "--add", action="append", required=True, help="Folder of a collected dataset (repeatable)."
+    )
+    mrg.add_argument("--output-root", required=True, help="Folder of the merged dataset.")
+    mrg.add_argument(
+        "--output-repo-id", default=None, help="Repo id of the merged dataset (default local/<folder>)."
+    )
+    _add_hub_flags(mrg)
+    mrg.add_argument("--overwrite", action="store_true", help="Replace a finished dataset at --output-root.")
+    mrg.set_defaults(func=_merge)
+
+    reb = sub.add_parser(
+        "rebase", help="Copy an ocr_joint checkpoint with another (e.g. retrained) base policy."
+    )
+    reb.add_argument(
+        "--policy-path", required=True, help="The ocr_joint checkpoint (pretrained_model folder)."
+    )
+    reb.add_argument("--base-path", required=True, help="The new base policy (pretrained_model folder).")
+    reb.add_argument("--output-dir", required=True, help="Folder of the new ocr_joint checkpoint.")
+    reb.add_argument("--overwrite", action="store_true", help="Replace a checkpoint at --output-dir.")
+    reb.set_defaults(func=_rebase)
+
+    push = sub.add_parser(
+        "push", help="Push a finished local LeRobotDataset to the hub (e.g. after a failed push)."
+    )
+    push.add_argument("--root", required=True, help="Folder of the dataset.")
+    push.add_argument("--repo-id", required=True, help="Hub repo id, e.g. you/pusht_ocr_collected.")
+    push.add_argument("--private", action="store_true", help="Make the hub repo private.")
+    push.set_defaults(func=_push)
     return parser
 
 
@@ -274,6 +364,8 @@ def main(argv: list[str] | None = None) -> int:
     if argv[:1] == ["eval"] and not {"-h", "--help"} & set(argv[1:]):
         # lerobot-eval's own `--key=value` flags pass through untouched (argparse would claim them).
         return _eval(argparse.Namespace(lerobot_eval_args=argv[1:]))
+    if argv[:1] == ["collect"]:  # LeRobot-style flags, parsed by LeRobot's own parser
+        return _collect(argv[1:])
     parser = build_parser()
     args, extra = parser.parse_known_args(argv)
     if args.command == "generate":

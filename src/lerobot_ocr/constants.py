@@ -15,3 +15,5 @@ SQUARE_TASK = "Pick up the square nut and place it over the square peg."
 
 # gym-pusht's goal pose of the T: (x, y) in pixels, theta in radians.
 PUSHT_GOAL_POSE = np.array([256.0, 256.0, np.pi / 4])
+# A collected frame's mode (`lerobot-ocr collect`); not an `observation.*` key: no policy takes it as input.
+OCR_IN_RECOVERY = "ocr.in_recovery"

@@ -249,5 +249,7 @@ def convert_dataset(
     shutil.rmtree(work, ignore_errors=True)
     converted = LeRobotDataset(out_id, root=output_root)
     if push_to_hub:
-        converted.push_to_hub(private=private)
+        from lerobot_ocr.hub import push_dataset
+
+        push_dataset(converted, private=private)
     return converted

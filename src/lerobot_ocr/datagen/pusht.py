@@ -105,7 +105,7 @@ def generate_pusht(
         {"region": region, "seed": seed, **options},
         episodes,
         seed,
-        lambda s: record_episode(env, expert, s),
+        lambda seeds: [record_episode(env, expert, s) for s in seeds],
         desc=f"Push-T expert demos ({region})",
         max_attempts=max_attempts,
         replace_stale=overwrite,

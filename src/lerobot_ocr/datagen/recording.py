@@ -59,12 +59,14 @@ def collect_episodes(
     params: dict,
     episodes: int,
     seed: int,
-    record: Callable[[int], dict[str, np.ndarray] | None],
+    record: Callable[[list[int]], list[dict[str, np.ndarray] | None]],
     desc: str,
     max_attempts: int | None = None,
     replace_stale: bool = False,
+    batch_size: int = 1,
 ) -> list[Path]:
-    """Cache `episodes` successful episodes in `work`; `record(env_seed)` returns arrays or None (failed).
+    """Cache `episodes` kept episodes in `work`; `record(env_seeds)` returns, per seed, the episode's
+    arrays or None (not kept: failed), for `batch_size` seeds at a time (a batch of envs).
 
     replace_stale: episodes cached with other `params` are deleted (with `--overwrite`), else refused.
     Raises:
@@ -88,16 +90,17 @@ def collect_episodes(
     attempt = max((int(k) for k in ledger["tried"]), default=-1) + 1
     with tqdm(total=episodes, initial=min(len(done), episodes), desc=desc, unit="episode") as bar:
         while len(done) < episodes and attempt < max_attempts:
-            ep_seed = seed + attempt
-            data = record(ep_seed)
-            if data is not None:
-                path = work / f"episode_{attempt:06d}.npz"
-                atomic_write(path, lambda p: _save_episode(p, ep_seed, data))
-                done.append(path)
-                bar.update(1)
-            ledger["tried"][str(attempt)] = {"seed": ep_seed, "success": data is not None}
+            attempts = range(attempt, attempt + batch_size)
+            for a, data in zip(attempts, record([seed + a for a in attempts]), strict=True):
+                if data is not None:
+                    path = work / f"episode_{a:06d}.npz"
+                    atomic_write(path, lambda p: _save_episode(p, seed + a, data))  # noqa: B023
+                    if path not in done:  # a batch cut short by an interruption runs again
+                        done.append(path)
+                        bar.update(1)
+                ledger["tried"][str(a)] = {"seed": seed + a, "success": data is not None}
             atomic_write(ledger_path, lambda p: p.write_text(json.dumps(ledger)))
-            attempt += 1
+            attempt += batch_size
     if len(done) < episodes:
         raise RuntimeError(
             f"Only {len(done)} successful episodes after {attempt} attempts (asked for {episodes})."
@@ -142,8 +145,10 @@ def build_dataset(
     robot_type: str,
     use_videos: bool,
     frames: Callable[[np.lib.npyio.NpzFile], Iterator[dict]],
+    meta_files: dict[str, dict] | None = None,
 ):
-    """Write the cached episodes (`frames(npz)` yields LeRobot frames) as a LeRobotDataset at `root`."""
+    """Write the cached episodes (`frames(npz)` yields LeRobot frames) as a LeRobotDataset at `root`;
+    `meta_files` = {file name: JSON content} go into its `meta/` (and so to the hub with it)."""
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     staging = root.with_name(root.name + ".tmp")
@@ -163,6 +168,8 @@ def build_dataset(
                 ds.add_frame(frame)
         ds.save_episode()
     ds.finalize()
+    for name, content in (meta_files or {}).items():
+        (staging / "meta" / name).write_text(json.dumps(content, indent=1))
     if root.exists():
         shutil.rmtree(root)
     staging.replace(root)
@@ -170,9 +177,15 @@ def build_dataset(
 
 
 def finish(ds, work: Path, push_to_hub: bool, private: bool, keep_work: bool):
-    """Push the dataset if asked and drop the episode cache (unless kept); return the dataset."""
-    if push_to_hub:
-        ds.push_to_hub(private=private)
+    """Drop the episode cache (unless kept), push the dataset if asked; return the dataset.
+
+    Raises:
+        lerobot_ocr.hub.HubPushError: the hub could not take it (the local dataset is complete).
+    """
+    from lerobot_ocr.hub import push_dataset
+
     if not keep_work:
         shutil.rmtree(work)
+    if push_to_hub:
+        push_dataset(ds, private=private)
     return ds

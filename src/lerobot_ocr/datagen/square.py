@@ -120,7 +120,7 @@ def generate_square(
         {"region": region, "seed": seed, "images": images, **options},
         episodes,
         seed,
-        lambda s: record_episode(env, expert, s),
+        lambda seeds: [record_episode(env, expert, s) for s in seeds],
         desc=f"Square expert demos ({region})",
         max_attempts=max_attempts,
         replace_stale=overwrite,

@@ -4,7 +4,8 @@ Importing this module imports gym-pusht (pygame, pymunk); `lerobot_ocr.envs.conf
 
 Observation (dict): as LeRobot's `pusht` env -- "pixels" (H, W, 3) uint8 + "agent_pos" (2,), or
 "environment_state" (16,) + "agent_pos" -- plus "object_pose" (3,) = block (x, y, theta) in the
-world (pixels; theta wrapped to [-pi, pi)), which `lerobot-eval` turns into `observation.object_pose`.
+world (pixels; theta wrapped to [-pi, pi)), which `lerobot-eval` turns into `observation.object_pose`,
+and "environment_state" (the T's 8 corners) with pixels too, as the generated demos hold it.
 """
 
 from __future__ import annotations
@@ -67,6 +68,9 @@ class PushTOcrEnv(PushTEnv):
             {
                 **self.observation_space.spaces,
                 "object_pose": spaces.Box(-np.inf, np.inf, (3,), dtype=np.float64),
+                # the T's 8 corners with every obs_type, as the generated demos hold them (so a policy's
+                # rollouts can be recorded with the demos' features: `lerobot-ocr collect`)
+                "environment_state": spaces.Box(0, 512, (16,), dtype=np.float64),
             }
         )
 
@@ -83,6 +87,8 @@ class PushTOcrEnv(PushTEnv):
     def get_obs(self):
         obs = super().get_obs()
         obs["object_pose"] = self.object_pose()
+        if "environment_state" not in obs:
+            obs["environment_state"] = self.get_keypoints(self._block_shapes).flatten()
         return obs
 
     def start_region(self) -> str:

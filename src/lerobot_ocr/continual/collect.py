@@ -1,0 +1,348 @@
+"""`lerobot-ocr collect`: a policy's own rollouts in a sim env, kept as demonstrations (the paper's §V).
+
+OCR's rollouts from out-of-distribution starts become new demonstrations for the base (arXiv
+2411.03294, Section V, Table III). Each batch of envs runs through LeRobot's own
+`lerobot_eval.rollout` (the env seeding, processors and task string of `lerobot-eval`), with any
+LeRobot policy (`ocr_joint` for OCR collection). Per episode, `--keep` picks the frames:
+
+- `episode` (default): successful episodes, cut at the success step (the recovery plus the base's
+  completion: the states the base lacks, and how it finished from them);
+- `recovery`: the reference's choice (`ood/continue_ood_collection.py`): frames from the start up
+  to the first hand-back, from episodes that began in recovery, handed back and then succeeded;
+- `all`: every frame of every episode (tests and debugging).
+
+The dataset has exactly the features, fps and robot type of `--like` (the base's training dataset),
+so `lerobot-ocr merge` joins them, plus `ocr.in_recovery` (bool per frame: the switch's mode; not an
+observation, so policies never take it as an input). `meta/ocr_collect.json` records the policy,
+env, seeds and, per episode, its seed, success step, first hand-back and frames in recovery.
+
+Same guarantees as `lerobot-ocr generate` (`lerobot_ocr.datagen.recording`): a progress bar, one
+atomic cache file per kept episode in `<root>.work/`, resume after an interruption, `<root>` appears
+only when complete. Seeds start at 300000 (the demos use 0.., the evals 100000..).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lerobot_ocr.constants import OCR_IN_RECOVERY
+
+KEEP = ("episode", "recovery", "all")
+COLLECT_SEED = 300_000
+DEFAULT_FEATURES = ("timestamp", "frame_index", "episode_index", "index", "task_index")
+RECOVERY_FEATURE = {OCR_IN_RECOVERY: {"dtype": "bool", "shape": (1,), "names": None}}
+
+
+def kept_length(success: np.ndarray, in_recovery: np.ndarray, steps: int, keep: str) -> int:
+    """How many frames of one episode to keep, from its first: 0 = drop it.
+
+    success, in_recovery: (T,) bool per step (`in_recovery` all False for a policy without a switch);
+    steps: the episode's own length (LeRobot steps finished envs until the batch ends).
+    Raises:
+        ValueError: an unknown `keep`.
+    """
+    if keep not in KEEP:
+        raise ValueError(f"--keep must be one of {KEEP}, got {keep!r}.")
+    success, in_recovery = np.asarray(success[:steps], bool), np.asarray(in_recovery[:steps], bool)
+    if keep == "all":
+        return steps
+    if not success.any():
+        return 0
+    end = int(success.argmax()) + 1  # through the success step
+    if keep == "episode":
+        return end
+    if not in_recovery[0] or in_recovery[:end].all():  # began on the base, or never handed back
+        return 0
+    return int(in_recovery.argmin())  # the frames before the first step on the base
+
+
+def like_features(meta) -> tuple[dict, bool]:
+    """The features to write (those of the LeRobotDatasetMetadata `meta`, less LeRobot's bookkeeping
+    columns) and whether they hold videos."""
+    features = {}
+    for key, ft in meta.features.items():
+        if key in DEFAULT_FEATURES:
+            continue
+        ft = {k: v for k, v in ft.items() if k != "info"}  # a video's encoder info is written anew
+        features[key] = {**ft, "shape": tuple(ft["shape"])}
+    return features, any(ft["dtype"] == "video" for ft in features.values())
+
+
+def episode_arrays(data: dict, row: int, n: int, in_recovery: np.ndarray, features: dict) -> dict:
+    """The first `n` frames of row `row` of a `lerobot_eval.rollout(..., return_observations=True)`
+    result, as one array per dataset feature of `features` (+ `ocr.in_recovery`).
+
+    Images come back from LeRobot's float CHW in [0, 1] to uint8 HWC (exact).
+    Raises:
+        ValueError: a feature the rollout does not give, or gives with another shape (with the fix).
+    """
+    obs = data["observation"]
+    out = {}
+    for key, ft in features.items():
+        if key == "action":
+            values = data["action"][row, :n].numpy()
+        elif key in ("next.reward", "next.success"):
+            values = data[key.split(".")[1]][row, :n].numpy()[:, None]
+        elif key == "next.done":
+            values = (np.arange(n) == n - 1)[:, None]
+        elif key in obs:
+            values = obs[key][row, :n]
+            if ft["dtype"] in ("image", "video"):
+                values = (values.permute(0, 2, 3, 1) * 255).round().clamp(0, 255).to(dtype=torch_uint8())
+            values = values.numpy()
+        else:
+            raise ValueError(
+                f"The --like dataset has feature {key!r}, which this env's rollout does not give (it gives "
+                f"{sorted(obs)}). Run the env with the same observations as the demos (e.g. "
+                "--env.obs_type=pixels_agent_pos for images), or pass the dataset the policy was trained on."
+            )
+        if tuple(values.shape[1:]) != tuple(ft["shape"]):
+            raise ValueError(
+                f"{key}: the rollout gives shape {tuple(values.shape[1:])}, the --like dataset has "
+                f"{tuple(ft['shape'])}. Use the env settings the demos were recorded with."
+            )
+        out[key] = values.astype(np.dtype(ft["dtype"])) if ft["dtype"] not in ("image", "video") else values
+    out[OCR_IN_RECOVERY] = np.asarray(in_recovery[:n], bool)[:, None]
+    return out
+
+
+def torch_uint8():
+    import torch
+
+    return torch.uint8
+
+
+def _frames(task: str, names: list[str]):
+    def frames(ep):
+        for i in range(len(ep["action"])):
+            yield {**{k: ep[k][i] for k in names}, "task": task}
+
+    return frames
+
+
+def sidecar(paths: list[Path], attempts: dict, settings: dict) -> dict:
+    """`meta/ocr_collect.json`: the run's settings, attempts, and per kept episode its seed, frames,
+    frames in recovery, success step and first hand-back (-1: none)."""
+    episodes = []
+    for path in paths:
+        with np.load(path) as ep:
+            flags = ep[OCR_IN_RECOVERY][:, 0]
+            episodes.append(
+                {
+                    "seed": int(ep["seed"]),
+                    "frames": int(len(flags)),
+                    "frames_in_recovery": int(flags.sum()),
+                    "started_in_recovery": bool(flags[0]),
+                    "success_step": int(ep["_success_step"]),
+                    "first_handback_step": int(ep["_first_handback_step"]),
+                }
+            )
+    tried = list(attempts.values())
+    return {
+        **settings,
+        "attempts": len(tried),
+        "successful_attempts": sum(1 for t in tried if t["success"]),
+        "episodes": episodes,
+    }
+
+
+def _rollout_batch(ctx: dict, seeds: list[int], keep: str, features: dict) -> list[dict | None]:
+    """Run one batch of envs from `seeds`; per row, its kept arrays (+ `_success_step`,
+    `_first_handback_step`) or None."""
+    import torch
+    from lerobot.scripts import lerobot_eval
+
+    from lerobot_ocr.eval_report import episode_steps
+    from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
+
+    policy = ctx["policy"]
+    with torch.no_grad():
+        data = lerobot_eval.rollout(
+            ctx["env"],
+            policy,
+            ctx["env_pre"],
+            ctx["env_post"],
+            ctx["pre"],
+            ctx["post"],
+            seeds=seeds,
+            return_observations=True,
+        )
+    success = data["success"].numpy()  # (B, T)
+    steps = episode_steps(data["done"].numpy())
+    if isinstance(policy, OcrJointPolicy):
+        modes = np.asarray(policy.ocr_stats()["in_recovery"], bool).T  # (B, T)
+    else:
+        modes = np.zeros_like(success, dtype=bool)
+    rows = []
+    for b, n_steps in enumerate(steps):
+        n = kept_length(success[b], modes[b], n_steps, keep)
+        if n == 0:
+            rows.append(None)
+            continue
+        arrays = episode_arrays(data, b, n, modes[b], features)
+        done = success[b, :n_steps]
+        arrays["_success_step"] = np.array(int(done.argmax()) + 1 if done.any() else -1)
+        back = modes[b, :n_steps]
+        arrays["_first_handback_step"] = np.array(int(back.argmin()) if back[0] and not back.all() else -1)
+        rows.append(arrays)
+    return rows
+
+
+def _setup(cfg) -> dict:
+    """Env, policy and processors exactly as `lerobot-eval`'s `eval_main` builds them."""
+    from lerobot.envs.factory import make_env, make_env_pre_post_processors
+    from lerobot.policies.factory import make_policy, make_pre_post_processors
+
+    envs = make_env(cfg.env, n_envs=cfg.eval.batch_size, use_async_envs=cfg.eval.use_async_envs)
+    env = next(iter(next(iter(envs.values())).values()))
+    policy = make_policy(cfg=cfg.policy, env_cfg=cfg.env, rename_map=cfg.rename_map)
+    policy.eval()
+    pre, post = make_pre_post_processors(
+        policy_cfg=cfg.policy,
+        pretrained_path=cfg.policy.pretrained_path,
+        preprocessor_overrides={
+            "device_processor": {"device": str(policy.config.device)},
+            "rename_observations_processor": {"rename_map": cfg.rename_map},
+        },
+    )
+    env_pre, env_post = make_env_pre_post_processors(env_cfg=cfg.env, policy_cfg=cfg.policy)
+    return {"env": env, "policy": policy, "pre": pre, "post": post, "env_pre": env_pre, "env_post": env_post}
+
+
+def _task(env, meta) -> str:
+    try:
+        return str(list(env.call("task_description"))[0])
+    except (AttributeError, NotImplementedError):
+        return str(meta.tasks.index[0]) if len(meta.tasks) else ""
+
+
+def collect(cfg) -> object:
+    """Run `cfg` (a `CollectConfig`) and return the written LeRobotDataset.
+
+    Raises:
+        ValueError: bad `--keep`, `--episodes`, a `--like` that is not a dataset, a policy that is not
+            given (`--policy.path`), `--keep=recovery` with a policy that has no switch, features the
+            rollout cannot fill; a work dir made with other settings.
+        FileExistsError: `--root` holds a dataset and `--overwrite` is off, or holds something else.
+        RuntimeError: fewer kept episodes than asked within `--max_attempts`.
+        lerobot_ocr.hub.HubPushError: the push failed (the local dataset is complete).
+    """
+    from lerobot.datasets.lerobot_dataset import LeRobotDatasetMetadata
+    from lerobot.utils.random_utils import set_seed
+
+    from lerobot_ocr.datagen.recording import build_dataset, collect_episodes, finish, work_dir
+
+    if cfg.keep not in KEEP:
+        raise ValueError(f"--keep must be one of {KEEP}, got {cfg.keep!r}.")
+    if cfg.episodes < 1:
+        raise ValueError(f"--episodes must be >= 1, got {cfg.episodes}.")
+    if cfg.policy is None or cfg.policy.pretrained_path is None:
+        raise ValueError("Pass the policy to collect with: --policy.path=<checkpoint folder or hub id>.")
+    like = Path(cfg.like)
+    if not (like / "meta" / "info.json").is_file():
+        raise ValueError(
+            f"--like={cfg.like!r} is not a LeRobotDataset folder (no meta/info.json): pass the root of the "
+            "dataset the base was trained on, so that the collected episodes merge with it."
+        )
+    if cfg.keep == "recovery" and cfg.policy.type != "ocr_joint":
+        raise ValueError(
+            f"--keep=recovery needs an ocr_joint policy (a switch); this one is {cfg.policy.type}."
+        )
+    root = Path(cfg.root)
+    meta = LeRobotDatasetMetadata("local/like", root=like)
+    features, use_videos = like_features(meta)
+    settings = {
+        "policy": str(cfg.policy.pretrained_path),
+        "policy_type": cfg.policy.type,
+        "env": json.loads(json.dumps(asdict(cfg.env), default=str)),
+        "keep": cfg.keep,
+        "seed": cfg.seed,
+        "batch_size": cfg.eval.batch_size,
+        "like": str(like.resolve()),
+    }
+    work = work_dir(root, cfg.overwrite)
+    set_seed(cfg.seed)
+    ctx = _setup(cfg)
+    paths = collect_episodes(
+        work,
+        settings,
+        cfg.episodes,
+        cfg.seed,
+        lambda seeds: _rollout_batch(ctx, seeds, cfg.keep, features),
+        desc=f"Collecting with {cfg.policy.type} (--keep={cfg.keep})",
+        max_attempts=cfg.max_attempts,
+        replace_stale=cfg.overwrite,
+        batch_size=cfg.eval.batch_size,
+    )
+    task = _task(ctx["env"], meta)
+    ctx["env"].close()
+    ledger = json.loads((work / "ledger.json").read_text())
+    ds = build_dataset(
+        paths,
+        root,
+        cfg.repo_id,
+        meta.fps,
+        {**features, **RECOVERY_FEATURE},
+        meta.robot_type,
+        use_videos,
+        _frames(task, [*features, OCR_IN_RECOVERY]),
+        meta_files={"ocr_collect.json": sidecar(paths, ledger["tried"], settings)},
+    )
+    logging.info(f"Kept {len(paths)} episodes of {len(ledger['tried'])} attempts.")
+    return finish(ds, work, cfg.push_to_hub, cfg.private, cfg.keep_work)
+
+
+def collect_config_class():
+    """`CollectConfig`: lerobot-eval's `EvalPipelineConfig` (`--policy.path`, `--env.*`, `--eval.batch_size`,
+    `--seed`, `--rename_map`) plus the collection's own fields. Built lazily: it imports LeRobot."""
+    from lerobot.configs.eval import EvalPipelineConfig
+
+    @dataclass
+    class CollectConfig(EvalPipelineConfig):
+        like: str = ""  # root of the dataset to match (the base's training data)
+        root: str = ""  # output folder of the collected dataset
+        repo_id: str = "local/ocr_collected"
+        episodes: int = 10  # episodes to keep
+        keep: str = "episode"  # episode | recovery | all
+        max_attempts: int | None = None  # default 3 * episodes + 20
+        push_to_hub: bool = False
+        private: bool = False
+        overwrite: bool = False
+        keep_work: bool = False
+        seed: int | None = COLLECT_SEED
+
+        def __post_init__(self) -> None:
+            super().__post_init__()
+            if not self.like or not self.root:
+                raise ValueError(
+                    "lerobot-ocr collect needs --like=<base dataset root> and --root=<output folder>."
+                )
+
+    return CollectConfig
+
+
+def main(argv: list[str]) -> object:
+    """`lerobot-ocr collect <args>`: parse `argv` as LeRobot parses lerobot-eval's, then `collect`."""
+    import sys
+
+    from lerobot.configs import parser
+
+    config_class = collect_config_class()
+    saved = sys.argv
+    sys.argv = ["lerobot-ocr-collect", *argv]  # LeRobot's parser reads --policy.path from sys.argv
+    try:
+        result = {}
+
+        def run(cfg):
+            result["ds"] = collect(cfg)
+
+        run.__annotations__["cfg"] = config_class  # LeRobot's parser reads the config class from here
+        parser.wrap()(run)()
+    finally:
+        sys.argv = saved
+    return result["ds"]

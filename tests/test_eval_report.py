@@ -122,3 +122,16 @@ def test_both_budgets_from_one_long_run():
     assert "success (≤ 400 steps)" in table and "reference budget (≤ 60 decisions)" in table
     assert "| joint_ood | 0.25 | [0.05, 0.70] | 0.50 [0.15, 0.85] | 4 |" in table
     assert summarize(info, None, episodes)["success_rate"] == 0.75  # no budget given: the episode's
+
+
+def test_paired_outcomes_count_per_episode_within_the_budget():
+    from lerobot_ocr.eval_report import paired_outcomes
+
+    a = {"success_step": [10, 500, -1, 300, 20], "step_budget": 400}
+    b = {"success_step": [12, 100, -1, -1, 600], "step_budget": 400}
+    assert paired_outcomes(a, b) == {"episodes": 5, "both": 1, "only_a": 2, "only_b": 1, "neither": 1}
+    # the whole episode: a's step 500 and b's step 600 count too
+    whole = {"episodes": 5, "both": 3, "only_a": 1, "only_b": 0, "neither": 1}
+    assert paired_outcomes(a, b, budget=10_000) == whole
+    with pytest.raises(ValueError, match="same episodes"):
+        paired_outcomes(a, {"success_step": [1]})

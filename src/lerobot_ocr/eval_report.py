@@ -304,3 +304,29 @@ def format_table(rows: dict[str, dict]) -> str:
             f"{r['n_episodes']} | {r['avg_max_reward']:.2f} | {rec} |"
         )
     return "\n".join(lines)
+
+
+def paired_outcomes(episodes_a: dict, episodes_b: dict, budget: int | None = None) -> dict:
+    """Two runs on the same seeds (`episodes.json` of each): how many episodes both / only a / only b /
+    neither solved within `budget` steps (None: each run's own step budget, else its whole episode).
+
+    Raises:
+        ValueError: the runs have different numbers of episodes (not the same seeds).
+    """
+    a, b = episodes_a["success_step"], episodes_b["success_step"]
+    if len(a) != len(b):
+        raise ValueError(f"Paired runs need the same episodes; got {len(a)} and {len(b)}.")
+
+    def solved(steps: list[int], run: dict) -> list[bool]:
+        cap = budget if budget is not None else run.get("step_budget")
+        return [s > 0 and (cap is None or s <= cap) for s in steps]
+
+    sa, sb = solved(a, episodes_a), solved(b, episodes_b)
+    pairs = list(zip(sa, sb))
+    return {
+        "episodes": len(pairs),
+        "both": pairs.count((True, True)),
+        "only_a": pairs.count((True, False)),
+        "only_b": pairs.count((False, True)),
+        "neither": pairs.count((False, False)),
+    }

@@ -1,0 +1,272 @@
+"""Continual learning, the paper's Table III: OCR collects demos from OOD starts, the base retrains on them.
+
+    .venv/bin/python benchmarks/continual.py --task pusht --profile quick   # the pipeline runs (≈ 25 min)
+    .venv/bin/python benchmarks/continual.py --task pusht --profile cpu     # the row (200 episodes per cell)
+    .venv/bin/python benchmarks/continual.py --task pusht --profile cpu --keep recovery   # the ablation
+
+Runs (or resumes) the task's OCR chain at the same profile (`lerobot_ocr.pipeline`: demos, base, ocr_joint
+and its four cells, in `outputs/<task>_ocr_<profile>/`), then, in `<that>/continual_<keep>/`, stages that
+resume like the chain's:
+1. collect: `lerobot-ocr collect` with the joint policy from OOD starts (seeds 300000+, `--keep`),
+   `collect_episodes` successes, episodes capped at the task's step budget;
+2. merge: `lerobot-ocr merge` of the base's data and the collected episodes;
+3. ft_aug / ft_ctrl: fine-tune the base for `ft_steps` with `--policy.path` (fresh statistics) on the
+   merged data, and the control on the base's data alone for the same steps (the base was still
+   improving with more steps, so this separates new data from more training);
+4. rebase: the joint policy with the augmented base;
+5. the cells (same eval seeds 100000+i as the chain's): the control, the augmented base and the joint
+   policy with the augmented base, from ID and OOD starts.
+Writes `benchmarks/results/<task>_continual_<profile>.json` (every cell, the collection line, the paired
+ID check: episodes both / only the base / only the augmented base solved) and the RESULTS.md section
+"Continual learning (<task>, <profile>)". `--set key=value` overrides profile values (chain's and ours).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import platform
+import shutil
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+sys.path[:0] = [str(HERE), str(REPO / "src")]
+from results_md import update_section  # noqa: E402
+
+from lerobot_ocr.pipeline import BIN, TASKS, Stages, eval_args, run, run_chain, trainer  # noqa: E402
+
+# Our stages' settings per profile (the chain's come from the task's profile of the same name).
+PROFILES = {
+    "quick": {"collect": 10, "ft_steps": 1000},
+    "cpu": {"collect": 100, "ft_steps": 20000},
+}
+PAPER = {  # Table III: base ID / OOD, then the augmented base's
+    "pusht": "base 0.90 / 0.10 → augmented base 0.97 / 0.80",
+    "square": "base 0.87 / 0.00 → augmented base 0.87 / 0.76",
+}
+COLLECT_SEED = 300_000
+
+
+def parse_args() -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--task", choices=sorted(TASKS), default="pusht")
+    parser.add_argument("--profile", choices=sorted(PROFILES), default="quick")
+    parser.add_argument("--keep", choices=["episode", "recovery"], default="episode")
+    parser.add_argument(
+        "--workdir", default=None, help="the chain's work dir (default outputs/<task>_ocr_<profile>)"
+    )
+    parser.add_argument(
+        "--no-update", action="store_true", help="do not write benchmarks/results or RESULTS.md"
+    )
+    parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="override profile values")
+    args = parser.parse_args()
+    task = TASKS[args.task]
+    if args.profile not in task.profiles:
+        parser.error(f"{task.title} has no {args.profile!r} chain profile ({sorted(task.profiles)}).")
+    p = {**task.profiles[args.profile], **PROFILES[args.profile]}
+    for item in args.set:
+        key, _, value = item.partition("=")
+        if key not in p or not isinstance(p[key], (int, float, str)):
+            keys = sorted(k for k, v in p.items() if not isinstance(v, tuple))
+            parser.error(f"--set: unknown key {key!r}; keys: {keys}")
+        p[key] = type(p[key])(value)
+    args.task_, args.settings = task, p
+    return args
+
+
+def finetune_args(p: dict, base_ckpt: Path, data: Path, repo_id: str, out: Path) -> list[str]:
+    """Fine-tune `base_ckpt` on `data`: `--policy.path` (weights kept, statistics from `data`), not resume."""
+    return [
+        *trainer(p),
+        f"--policy.path={base_ckpt}",
+        f"--dataset.repo_id={repo_id}",
+        f"--dataset.root={data}",
+        f"--policy.device={p['device']}",
+        "--policy.push_to_hub=false",
+        f"--steps={p['ft_steps']}",
+        f"--batch_size={p['base_batch']}",
+        "--num_workers=0",
+        "--env_eval_freq=0",
+        f"--save_freq={p['ft_steps']}",
+        "--log_freq=500",
+        "--seed=1000",
+        f"--output_dir={out}",
+    ]
+
+
+def main() -> None:
+    from lerobot_ocr.eval_report import format_table, paired_outcomes, summarize
+
+    args = parse_args()
+    task, p = args.task_, args.settings
+    work = Path(args.workdir or REPO / "outputs" / f"{task.name}_ocr_{args.profile}").resolve()
+    chain = run_chain(task, p, work)
+    here = work / f"continual_{args.keep}"
+    here.mkdir(parents=True, exist_ok=True)
+    stage, logs = Stages(here), here / "logs"
+    base_data, collected, merged = work / "base_data", here / "collected", here / "merged"
+    obs = "environment_state_agent_pos" if p["base"] == "lowdim" and task.name == "pusht" else None
+
+    def collect():
+        run(
+            [
+                str(BIN / "lerobot-ocr"),
+                "collect",
+                f"--policy.path={chain.ocr_ckpt}",
+                f"--env.type={task.env_type}",
+                "--env.region=ood",
+                *([f"--env.obs_type={obs}"] if obs else []),
+                *task.eval_overrides,
+                *([f"--env.episode_length={task.step_budget}"] if task.step_budget else []),
+                f"--like={base_data}",
+                f"--root={collected}",
+                f"--repo_id=local/{task.name}_collected",
+                f"--episodes={p['collect']}",
+                f"--keep={args.keep}",
+                f"--eval.batch_size={p['eval_batch']}",
+                "--eval.use_async_envs=false",
+                f"--policy.device={p['device']}",
+                f"--seed={COLLECT_SEED}",
+                f"--max_attempts={20 * p['collect'] + 20}",
+                "--overwrite",
+            ],
+            logs / "collect.log",
+        )
+        side = json.loads((collected / "meta" / "ocr_collect.json").read_text())
+        frames = [e["frames"] for e in side["episodes"]]
+        return {
+            "attempts": side["attempts"],
+            "kept_episodes": len(frames),
+            "kept_frames": sum(frames),
+            "frames_in_recovery": sum(e["frames_in_recovery"] for e in side["episodes"]),
+            "started_in_recovery": sum(e["started_in_recovery"] for e in side["episodes"]),
+        }
+
+    collection = stage("collect", collect)
+
+    def merge():
+        run(
+            [
+                str(BIN / "lerobot-ocr"),
+                "merge",
+                "--base",
+                str(base_data),
+                "--add",
+                str(collected),
+                "--output-root",
+                str(merged),
+                "--output-repo-id",
+                f"local/{task.name}_aug",
+                "--overwrite",
+            ],
+            logs / "merge.log",
+        )
+        info = json.loads((merged / "meta" / "info.json").read_text())
+        base_info = json.loads((base_data / "meta" / "info.json").read_text())
+        return {"frames": info["total_frames"], "base_frames": base_info["total_frames"]}
+
+    data = stage("merge", merge)
+    ckpts = {}
+    for name, root, repo in (
+        ("aug", merged, f"local/{task.name}_aug"),
+        ("ctrl", base_data, f"local/{task.name}_base"),
+    ):
+        out = here / f"base_{name}"
+
+        def finetune(out=out, root=root, repo=repo, name=name):
+            shutil.rmtree(out, ignore_errors=True)
+            run(finetune_args(p, chain.base_ckpt, root, repo, out), logs / f"ft_{name}.log")
+
+        stage(f"ft_{name}", finetune)
+        ckpts[name] = out / "checkpoints" / "last" / "pretrained_model"
+
+    joint_aug = here / "joint_aug"
+
+    def rebase():
+        from lerobot_ocr.continual.rebase import rebase as do_rebase
+
+        do_rebase(chain.ocr_ckpt, ckpts["aug"], joint_aug, overwrite=True)
+
+    stage("rebase", rebase)
+    cells = {
+        "ctrl_base_id": (ckpts["ctrl"], "id"),
+        "ctrl_base_ood": (ckpts["ctrl"], "ood"),
+        "aug_base_id": (ckpts["aug"], "id"),
+        "aug_base_ood": (ckpts["aug"], "ood"),
+        "aug_joint_ood": (joint_aug, "ood"),
+        "aug_joint_id": (joint_aug, "id"),
+    }
+    results = {
+        name: chain.results[name]
+        for name in ("base_id", "base_ood", "joint_ood", "joint_id")
+        if name in chain.results
+    }
+    for name, (ckpt, region) in cells.items():
+        out = here / f"eval_{name}"
+
+        def evaluate(ckpt=ckpt, region=region, out=out, name=name):
+            shutil.rmtree(out, ignore_errors=True)
+            run(eval_args(task, ckpt, region, p, out), logs / f"eval_{name}.log")
+            read = (
+                json.loads((out / f).read_text()) if (out / f).exists() else None
+                for f in ("eval_info.json", "ocr_stats.json", "episodes.json")
+            )
+            return summarize(*read)
+
+        results[name] = stage(f"eval_{name}", evaluate)
+    paired, base_id = None, chain.eval_dirs.get("base_id")
+    if base_id is not None and (base_id / "episodes.json").exists():
+        paired = paired_outcomes(
+            json.loads((base_id / "episodes.json").read_text()),
+            json.loads((here / "eval_aug_base_id" / "episodes.json").read_text()),
+        )
+    table = format_table(results)
+    ratio = collection["kept_episodes"] / max(1, collection["attempts"])
+    c = collection
+    lines = [
+        f"Collection (`--keep={args.keep}`): {c['kept_episodes']} episodes kept of {c['attempts']} attempts "
+        f"({ratio:.2f}), {c['kept_frames']} frames ({c['frames_in_recovery']} in recovery) added to the "
+        f"base's {data['base_frames']}; base and control fine-tuned {p['ft_steps']} steps.",
+    ]
+    if paired:
+        lines.append(
+            f"Paired ID check (same {paired['episodes']} seeds): both solved {paired['both']}, only the base "
+            f"{paired['only_a']}, only the augmented base {paired['only_b']}, neither {paired['neither']}."
+        )
+    print(table + "\n\n" + "\n".join(lines))
+    if args.no_update:
+        return
+    record = {
+        "task": task.name,
+        "profile": args.profile,
+        "keep": args.keep,
+        "settings": p,
+        "date": dt.date.today().isoformat(),
+        "machine": f"{platform.machine()}, python {platform.python_version()}",
+        "collection": collection,
+        "merged": data,
+        "paired_id": paired,
+        "cells": results,
+        "paper": PAPER[task.name],
+    }
+    suffix = "" if args.keep == "episode" else f"_{args.keep}"
+    out = HERE / "results" / f"{task.name}_continual_{args.profile}{suffix}.json"
+    out.write_text(json.dumps(record, indent=2, default=str))
+    command = (
+        f"`.venv/bin/python benchmarks/continual.py --task {task.name} --profile {args.profile} "
+        f"--keep {args.keep}`"
+    )
+    update_section(
+        f"Continual learning ({task.title}, {args.profile}{', ' + args.keep if suffix else ''})",
+        f"{command} on {record['machine']}, {record['date']}. Paper (Table III): {PAPER[task.name]}. "
+        "Rows: the chain's base and joint; `ctrl_base` = the base fine-tuned on its own data for the same "
+        "steps; `aug_base` = fine-tuned on the base's data plus the collected episodes; `aug_joint` = the "
+        "joint policy with `aug_base` (`lerobot-ocr rebase`).\n\n" + table + "\n\n" + "\n".join(lines),
+    )
+
+
+if __name__ == "__main__":
+    main()

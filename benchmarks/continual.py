@@ -36,7 +36,7 @@ REPO = HERE.parent
 sys.path[:0] = [str(HERE), str(REPO / "src")]
 from results_md import update_section  # noqa: E402
 
-from lerobot_ocr.pipeline import BIN, TASKS, Stages, eval_args, run, run_chain, trainer  # noqa: E402
+from lerobot_ocr.pipeline import BIN, CELLS, TASKS, Stages, eval_args, run, run_chain, trainer  # noqa: E402
 
 # Our stages' settings per profile (the chain's come from the task's profile of the same name).
 PROFILES = {
@@ -56,12 +56,20 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--profile", choices=sorted(PROFILES), default="quick")
     parser.add_argument("--keep", choices=["episode", "recovery"], default="episode")
     parser.add_argument(
+        "--label", default=None, help="the row's name in results and RESULTS.md (default: the profile)"
+    )
+    parser.add_argument(
         "--workdir", default=None, help="the chain's work dir (default outputs/<task>_ocr_<profile>)"
     )
     parser.add_argument(
         "--no-update", action="store_true", help="do not write benchmarks/results or RESULTS.md"
     )
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="override profile values")
+    parser.add_argument(
+        "--chain-cells",
+        default=",".join(CELLS),
+        help="the chain's cells to evaluate (comma-separated; base_id is needed for the paired ID check)",
+    )
     args = parser.parse_args()
     task = TASKS[args.task]
     if args.profile not in task.profiles:
@@ -73,6 +81,10 @@ def parse_args() -> argparse.Namespace:
             keys = sorted(k for k, v in p.items() if not isinstance(v, tuple))
             parser.error(f"--set: unknown key {key!r}; keys: {keys}")
         p[key] = type(p[key])(value)
+    cells = tuple(c for c in args.chain_cells.split(",") if c)
+    if set(cells) - set(CELLS):
+        parser.error(f"--chain-cells: unknown {sorted(set(cells) - set(CELLS))}; cells: {CELLS}")
+    p["cells"] = cells
     args.task_, args.settings = task, p
     return args
 
@@ -191,11 +203,11 @@ def main() -> None:
         do_rebase(chain.ocr_ckpt, ckpts["aug"], joint_aug, overwrite=True)
 
     stage("rebase", rebase)
-    cells = {
-        "ctrl_base_id": (ckpts["ctrl"], "id"),
-        "ctrl_base_ood": (ckpts["ctrl"], "ood"),
-        "aug_base_id": (ckpts["aug"], "id"),
+    cells = {  # the headline first
         "aug_base_ood": (ckpts["aug"], "ood"),
+        "aug_base_id": (ckpts["aug"], "id"),
+        "ctrl_base_ood": (ckpts["ctrl"], "ood"),
+        "ctrl_base_id": (ckpts["ctrl"], "id"),
         "aug_joint_ood": (joint_aug, "ood"),
         "aug_joint_id": (joint_aug, "id"),
     }
@@ -239,9 +251,12 @@ def main() -> None:
     print(table + "\n\n" + "\n".join(lines))
     if args.no_update:
         return
+    suffix = "" if args.keep == "episode" else f"_{args.keep}"
+    label = args.label or args.profile
     record = {
         "task": task.name,
         "profile": args.profile,
+        "label": label,
         "keep": args.keep,
         "settings": p,
         "date": dt.date.today().isoformat(),
@@ -252,15 +267,14 @@ def main() -> None:
         "cells": results,
         "paper": PAPER[task.name],
     }
-    suffix = "" if args.keep == "episode" else f"_{args.keep}"
-    out = HERE / "results" / f"{task.name}_continual_{args.profile}{suffix}.json"
+    out = HERE / "results" / f"{task.name}_continual_{label}{suffix}.json"
     out.write_text(json.dumps(record, indent=2, default=str))
     command = (
         f"`.venv/bin/python benchmarks/continual.py --task {task.name} --profile {args.profile} "
-        f"--keep {args.keep}`"
+        f"--keep {args.keep}" + (f" --workdir {work} --set {' '.join(args.set)}" if args.set else "") + "`"
     )
     update_section(
-        f"Continual learning ({task.title}, {args.profile}{', ' + args.keep if suffix else ''})",
+        f"Continual learning ({task.title}, {label}{', ' + args.keep if suffix else ''})",
         f"{command} on {record['machine']}, {record['date']}. Paper (Table III): {PAPER[task.name]}. "
         "Rows: the chain's base and joint; `ctrl_base` = the base fine-tuned on its own data for the same "
         "steps; `aug_base` = fine-tuned on the base's data plus the collected episodes; `aug_joint` = the "

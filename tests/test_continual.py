@@ -272,3 +272,97 @@ def test_collect_merge_finetune_rebase_eval(
         == 0
     )
     assert json.loads((out / "eval_info.json").read_text())["overall"]["n_episodes"] == 1
+
+
+def test_batched_collection_resumes_a_batch_cut_short(tmp_path, monkeypatch):
+    """An interruption while a batch saves its episodes: on resume those files go, the batch runs again,
+    and every seed is tried once in order."""
+    from lerobot_ocr.datagen import recording
+
+    calls = []
+
+    def record(seeds):
+        calls.append(list(seeds))
+        return [{"action": np.full((3, 2), s, np.float32)} if s % 2 == 0 else None for s in seeds]
+
+    real_write, writes = recording.atomic_write, {"n": 0}
+
+    def dying_write(path, write):
+        if path.name.startswith("episode_"):
+            writes["n"] += 1
+            if writes["n"] == 3:  # the second episode of the second batch
+                real_write(path, write)
+                raise KeyboardInterrupt
+        return real_write(path, write)
+
+    monkeypatch.setattr(recording, "atomic_write", dying_write)
+    with pytest.raises(KeyboardInterrupt):
+        recording.collect_episodes(tmp_path, {"a": 1}, 5, 100, record, "t", batch_size=4)
+    assert calls == [[100, 101, 102, 103], [104, 105, 106, 107]]
+    assert len(list(tmp_path.glob("episode_*.npz"))) == 3  # 2 of batch 1, 1 of the cut batch 2
+    monkeypatch.setattr(recording, "atomic_write", real_write)
+    paths = recording.collect_episodes(tmp_path, {"a": 1}, 5, 100, record, "t", batch_size=4, max_attempts=10)
+    assert calls[2:] == [[104, 105, 106, 107], [108, 109]]  # batch 2 again, then a last batch clamped at 10
+    seeds = [int(np.load(p)["seed"]) for p in paths]
+    assert seeds == [100, 102, 104, 106, 108]
+    ledger = json.loads((tmp_path / "ledger.json").read_text())
+    assert sorted(int(k) for k in ledger["tried"]) == list(range(10)) and ledger["params"] == {"a": 1}
+
+
+def test_collected_frames_line_up_with_the_rollout():
+    """Frame t holds observation t, action t and the reward/success of step t; the last kept frame is
+    the success, and the extra last observation of LeRobot's rollout is dropped."""
+    import torch
+
+    from lerobot_ocr.continual.collect import episode_arrays
+
+    b, t = 2, 5
+    step = torch.arange(t + 1, dtype=torch.float32)
+    data = {
+        "observation": {
+            "observation.state": step.repeat(b, 1)[..., None].expand(b, t + 1, 2).clone(),
+            "observation.image": (step / 255).view(1, t + 1, 1, 1, 1).expand(b, t + 1, 3, 4, 4).clone(),
+        },
+        "action": step[:t].repeat(b, 1)[..., None].expand(b, t, 2) + 0.5,
+        "reward": step[:t].repeat(b, 1) / 10,
+        "success": torch.tensor([[False, False, True, True, True]] * b),
+    }
+    features = {
+        "observation.state": {"dtype": "float32", "shape": (2,)},
+        "observation.image": {"dtype": "image", "shape": (4, 4, 3)},
+        "action": {"dtype": "float32", "shape": (2,)},
+        "next.reward": {"dtype": "float32", "shape": (1,)},
+        "next.success": {"dtype": "bool", "shape": (1,)},
+        "next.done": {"dtype": "bool", "shape": (1,)},
+    }
+    n = kept_length(data["success"][1].numpy(), np.array([1, 1, 0, 0, 0], bool), t, "episode")
+    ep = episode_arrays(data, 1, n, np.array([1, 1, 0, 0, 0], bool), features)
+    assert n == 3 and ep["observation.state"][:, 0].tolist() == [0, 1, 2]
+    assert ep["observation.image"].dtype == np.uint8 and ep["observation.image"][:, 0, 0, 0].tolist() == [
+        0,
+        1,
+        2,
+    ]
+    assert ep["action"][:, 0].tolist() == [0.5, 1.5, 2.5]
+    assert ep["next.success"][:, 0].tolist() == [False, False, True]
+    assert ep["next.done"][:, 0].tolist() == [False, False, True]
+    assert ep["ocr.in_recovery"][:, 0].tolist() == [True, True, False]
+    with pytest.raises(ValueError, match="does not give"):
+        episode_arrays(data, 1, n, np.zeros(t, bool), {"observation.environment_state": {"shape": (16,)}})
+    with pytest.raises(ValueError, match="shape"):
+        episode_arrays(
+            data, 1, n, np.zeros(t, bool), {"observation.state": {"dtype": "float32", "shape": (3,)}}
+        )
+
+
+def test_a_push_to_a_placeholder_repo_id_is_refused_before_any_work(tmp_path):
+    from lerobot_ocr.continual.merge import merge
+
+    with pytest.raises(ValueError, match="--output-repo-id=<your user or org>/<name>"):
+        merge(
+            [(tmp_path / "a", "x/a"), (tmp_path / "b", "x/b")],
+            tmp_path / "out",
+            "local/out",
+            push_to_hub=True,
+        )
+    assert not (tmp_path / "out").exists()

@@ -196,6 +196,10 @@ def convert_dataset(
         raise ValueError(f"Keypoint spec mismatch: {d}D keypoints with a {rotation!r} pose.")
     src_kps = resolve_keypoints(source_keypoints) if source_keypoints is not None else local
     output_root = check_output(output_root, overwrite)
+    if push_to_hub:
+        from lerobot_ocr.hub import check_pushable
+
+        check_pushable(output_repo_id or f"{repo_id}_ocr", "--output-repo-id")
     staging = output_root.with_name(output_root.name + ".tmp")
     work = output_root.with_name(output_root.name + ".work")
 

@@ -16,15 +16,29 @@ class HubPushError(RuntimeError):
     """The hub could not take the dataset; the local copy is complete and untouched."""
 
 
+def check_pushable(repo_id: str, flag: str = "--repo-id") -> None:
+    """Refuse, before any work, a push to a placeholder repo id (`local/...`).
+
+    Raises:
+        ValueError: `repo_id` is not `<user or org>/<name>` or is under `local/`.
+    """
+    if repo_id.count("/") != 1 or repo_id.startswith("local/"):
+        raise ValueError(
+            f"Cannot push {repo_id!r} to the hub: pass {flag}=<your user or org>/<name> with --push-to-hub."
+        )
+
+
 def push_dataset(ds, private: bool = False, tags: list[str] | None = None) -> None:
     """Upload the LeRobotDataset `ds` (its `root`) under its `repo_id`, tagged `lerobot-ocr` (+ `tags`).
 
     Raises:
         HubPushError: the hub could not be reached or refused the upload (network, offline mode,
             login, permissions); the message names the local folder and the command to retry.
+        ValueError: a placeholder repo id (`check_pushable`).
     """
     import httpx
 
+    check_pushable(ds.repo_id)
     try:
         ds.push_to_hub(private=private, tags=[*TAGS, *(tags or [])])
     except (OSError, httpx.HTTPError) as e:  # requests/httpx network errors, hub HTTP errors, offline mode

@@ -126,8 +126,10 @@ def _frames(task: str, names: list[str]):
 
 
 def sidecar(paths: list[Path], attempts: dict, settings: dict) -> dict:
-    """`meta/ocr_collect.json`: the run's settings, attempts, and per kept episode its seed, frames,
-    frames in recovery, success step and first hand-back (-1: none)."""
+    """`meta/ocr_collect.json`: the run's settings; `attempts`, the episodes run up to the last one kept;
+    per kept episode its seed, frames, frames in recovery, whether it began in recovery, `success_step`
+    (steps through the first success, -1: none) and `first_handback_step` (steps before the first step
+    on the base, -1: never handed back)."""
     episodes = []
     for path in paths:
         with np.load(path) as ep:
@@ -142,11 +144,12 @@ def sidecar(paths: list[Path], attempts: dict, settings: dict) -> dict:
                     "first_handback_step": int(ep["_first_handback_step"]),
                 }
             )
-    tried = list(attempts.values())
+    last = max((e["seed"] for e in episodes), default=settings["seed"] - 1)
+    used = [t for t in attempts.values() if t["seed"] <= last]
     return {
         **settings,
-        "attempts": len(tried),
-        "successful_attempts": sum(1 for t in tried if t["success"]),
+        "attempts": len(used),
+        "kept": len(episodes),
         "episodes": episodes,
     }
 
@@ -156,11 +159,14 @@ def _rollout_batch(ctx: dict, seeds: list[int], keep: str, features: dict) -> li
     `_first_handback_step`) or None."""
     import torch
     from lerobot.scripts import lerobot_eval
+    from lerobot.utils.random_utils import set_seed
 
     from lerobot_ocr.eval_report import episode_steps
     from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
 
-    policy = ctx["policy"]
+    policy, n = ctx["policy"], len(seeds)
+    set_seed(seeds[0])  # each batch from its own seed: a batch run again after an interruption is the same
+    padded = [*seeds, *range(seeds[-1] + 1, seeds[-1] + 1 + ctx["env"].num_envs - n)]  # a last, short batch
     with torch.no_grad():
         data = lerobot_eval.rollout(
             ctx["env"],
@@ -169,7 +175,7 @@ def _rollout_batch(ctx: dict, seeds: list[int], keep: str, features: dict) -> li
             ctx["env_post"],
             ctx["pre"],
             ctx["post"],
-            seeds=seeds,
+            seeds=padded,
             return_observations=True,
         )
     success = data["success"].numpy()  # (B, T)
@@ -179,7 +185,7 @@ def _rollout_batch(ctx: dict, seeds: list[int], keep: str, features: dict) -> li
     else:
         modes = np.zeros_like(success, dtype=bool)
     rows = []
-    for b, n_steps in enumerate(steps):
+    for b, n_steps in enumerate(steps[:n]):
         n = kept_length(success[b], modes[b], n_steps, keep)
         if n == 0:
             rows.append(None)
@@ -198,7 +204,12 @@ def _setup(cfg) -> dict:
     from lerobot.envs.factory import make_env, make_env_pre_post_processors
     from lerobot.policies.factory import make_policy, make_pre_post_processors
 
-    envs = make_env(cfg.env, n_envs=cfg.eval.batch_size, use_async_envs=cfg.eval.use_async_envs)
+    envs = make_env(
+        cfg.env,
+        n_envs=cfg.eval.batch_size,
+        use_async_envs=cfg.eval.use_async_envs,
+        trust_remote_code=cfg.trust_remote_code,
+    )
     env = next(iter(next(iter(envs.values())).values()))
     policy = make_policy(cfg=cfg.policy, env_cfg=cfg.env, rename_map=cfg.rename_map)
     policy.eval()
@@ -215,10 +226,13 @@ def _setup(cfg) -> dict:
 
 
 def _task(env, meta) -> str:
+    """The `--like` dataset's task when it has one (so a merge keeps one task), else the env's."""
+    if len(meta.tasks) == 1:
+        return str(meta.tasks.index[0])
     try:
         return str(list(env.call("task_description"))[0])
     except (AttributeError, NotImplementedError):
-        return str(meta.tasks.index[0]) if len(meta.tasks) else ""
+        return ""
 
 
 def collect(cfg) -> object:
@@ -249,6 +263,10 @@ def collect(cfg) -> object:
             f"--like={cfg.like!r} is not a LeRobotDataset folder (no meta/info.json): pass the root of the "
             "dataset the base was trained on, so that the collected episodes merge with it."
         )
+    if cfg.push_to_hub:
+        from lerobot_ocr.hub import check_pushable
+
+        check_pushable(cfg.repo_id, "--repo_id")
     if cfg.keep == "recovery" and cfg.policy.type != "ocr_joint":
         raise ValueError(
             f"--keep=recovery needs an ocr_joint policy (a switch); this one is {cfg.policy.type}."

@@ -25,8 +25,17 @@ OCR_PREFIX = "ocr."
 
 
 def _spec(ft: dict) -> dict:
-    """What must agree for a merge: dtype, shape, names (a video's encoder details aside)."""
-    return {"dtype": ft.get("dtype"), "shape": list(ft.get("shape", [])), "names": ft.get("names")}
+    """What must agree for a merge (LeRobot's `features_equal_for_merge`): dtype, shape, names and a
+    video's stream info (codec, pixel format, size, fps), its encoder settings aside."""
+    from lerobot.configs import VIDEO_ENCODER_INFO_KEYS
+
+    info = {k: v for k, v in (ft.get("info") or {}).items() if k not in VIDEO_ENCODER_INFO_KEYS}
+    return {
+        "dtype": ft.get("dtype"),
+        "shape": list(ft.get("shape", [])),
+        "names": ft.get("names"),
+        "info": info,
+    }
 
 
 def differences(reference: tuple[str, object], other: tuple[str, object]) -> list[str]:
@@ -48,7 +57,7 @@ def differences(reference: tuple[str, object], other: tuple[str, object]) -> lis
         lines.append(f"{key}: only in {name_b}")
     for key in sorted(set(fa) & set(fb)):
         sa, sb = _spec(fa[key]), _spec(fb[key])
-        for field in ("dtype", "shape", "names"):
+        for field in ("dtype", "shape", "names", "info"):
             if sa[field] != sb[field]:
                 lines.append(f"{key}.{field}: {name_a} {sa[field]}, {name_b} {sb[field]}")
     return lines
@@ -76,6 +85,10 @@ def merge(
 
     if len(sources) < 2:
         raise ValueError("Merging needs at least two datasets: the base's and one or more collected.")
+    if push_to_hub:
+        from lerobot_ocr.hub import check_pushable
+
+        check_pushable(output_repo_id, "--output-repo-id")
     output_root = check_output(output_root, overwrite)
     metas = []
     for root, repo_id in sources:
@@ -89,7 +102,7 @@ def merge(
             + "\n  ".join(problems)
             + "\nCollect with `lerobot-ocr collect --like=<the base's dataset>` so that the features match."
         )
-    work = output_root.with_name(output_root.name + ".work")
+    work = output_root.with_name(output_root.name + ".merge-work")  # not `.work`: collect's cache
     staging = output_root.with_name(output_root.name + ".tmp")
     for path in (work, staging):
         if path.exists():

@@ -4,7 +4,8 @@ An `ocr_joint` checkpoint holds its base policy's own folder in `base/`. After t
 the base's demos plus OCR-collected episodes, the same manifold and inverse policy work with the new
 base: their data are the original demos, and refitting the manifold on the merged data would teach the
 switch that the collected OOD states are in distribution. `rebase` copies the checkpoint with the new
-base in `base/` and `base_path` pointing at it, so `--policy.path=<output>` loads it as it is.
+base in `base/` (what loads) and `base_path` naming where it came from, so `--policy.path=<output>`
+loads it as it is.
 """
 
 from __future__ import annotations

@@ -95,6 +95,10 @@ def generate_pusht(
     from lerobot_ocr.experts.pusht_expert import PushTExpert
 
     root = Path(root)
+    if push_to_hub:
+        from lerobot_ocr.hub import check_pushable
+
+        check_pushable(repo_id)
     options = env_settings(env_options)
     env_cfg = PushtOcrEnvConfig(**{**options, "region": region, "obs_type": "pixels_agent_pos"})
     work = work_dir(root, overwrite)

@@ -66,7 +66,11 @@ def collect_episodes(
     batch_size: int = 1,
 ) -> list[Path]:
     """Cache `episodes` kept episodes in `work`; `record(env_seeds)` returns, per seed, the episode's
-    arrays or None (not kept: failed), for `batch_size` seeds at a time (a batch of envs).
+    arrays or None (not kept: failed), for up to `batch_size` seeds at a time (a batch of envs).
+
+    The ledger `work/ledger.json` holds the settings and every finished batch's attempts; episodes a
+    batch saved before an interruption cut it short are deleted on resume, and the batch runs again.
+    Returns the first `episodes` kept episodes in attempt order.
 
     replace_stale: episodes cached with other `params` are deleted (with `--overwrite`), else refused.
     Raises:
@@ -85,22 +89,28 @@ def collect_episodes(
             "to resume, or another --root."
         )
     ledger["params"] = params
-    done = sorted(work.glob("episode_*.npz"))
+    atomic_write(ledger_path, lambda p: p.write_text(json.dumps(ledger)))  # the settings, before any episode
+    done = []
+    for path in sorted(work.glob("episode_*.npz")):
+        if str(int(path.stem.split("_")[1])) in ledger["tried"]:
+            done.append(path)
+        else:  # saved by a batch an interruption cut short: that batch runs again
+            path.unlink()
     max_attempts = max_attempts or 3 * episodes + 20
     attempt = max((int(k) for k in ledger["tried"]), default=-1) + 1
     with tqdm(total=episodes, initial=min(len(done), episodes), desc=desc, unit="episode") as bar:
         while len(done) < episodes and attempt < max_attempts:
-            attempts = range(attempt, attempt + batch_size)
+            attempts = range(attempt, min(attempt + batch_size, max_attempts))
             for a, data in zip(attempts, record([seed + a for a in attempts]), strict=True):
                 if data is not None:
                     path = work / f"episode_{a:06d}.npz"
                     atomic_write(path, lambda p: _save_episode(p, seed + a, data))  # noqa: B023
-                    if path not in done:  # a batch cut short by an interruption runs again
-                        done.append(path)
+                    done.append(path)
+                    if len(done) <= episodes:  # a batch may keep more than asked: the first are used
                         bar.update(1)
                 ledger["tried"][str(a)] = {"seed": seed + a, "success": data is not None}
             atomic_write(ledger_path, lambda p: p.write_text(json.dumps(ledger)))
-            attempt += batch_size
+            attempt = attempts.stop
     if len(done) < episodes:
         raise RuntimeError(
             f"Only {len(done)} successful episodes after {attempt} attempts (asked for {episodes})."

@@ -109,6 +109,10 @@ def generate_square(
     from lerobot_ocr.experts.square_expert import SquareExpert
 
     root = Path(root)
+    if push_to_hub:
+        from lerobot_ocr.hub import check_pushable
+
+        check_pushable(repo_id)
     options = env_settings(env_options)
     obs_type = "pixels_agent_pos" if images else "environment_state_agent_pos"
     env_cfg = SquareOcrEnvConfig(**{**options, "region": region, "obs_type": obs_type})

@@ -21,6 +21,17 @@ def test_the_summary_takes_each_cells_largest_measurement():
     assert summary.fmt(128, 200) == "0.64 [0.57, 0.70]"
 
 
+def test_the_summary_gives_the_reference_budget_and_the_recovery_efficiency():
+    result = {c: cell(0.8, 200) for c in summary.CELLS} | {"date": "2026-11-30"}
+    assert summary.reference_budget(result) == ("—", "—", "—")  # a run made before both budgets
+    result["joint_ood"] |= {
+        "success_rate_reference_budget": 0.67,
+        "started_ood": {"mean_first_base_step": 138.4},
+    }
+    result["base_id"] |= {"success_rate_reference_budget": 0.77}
+    assert summary.reference_budget(result) == ("0.67 [0.60, 0.73]", "0.87", "138")
+
+
 def test_a_probe_is_adoptable_only_outside_its_baselines_interval():
     baseline = {"name": "plain", "success_rate": 0.64, "ci95": [0.57, 0.70]}
     assert probe.verdict({"success_rate": 0.685}, baseline) == "inside"

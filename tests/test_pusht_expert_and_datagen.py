@@ -85,7 +85,9 @@ def test_generation_resumes_after_interruption(tmp_path, monkeypatch):
     )
     ds = datagen.generate_pusht(root, episodes=2, region="id", use_videos=False, push_to_hub=True)
     assert ds.meta.total_episodes == 2
-    assert pushed == [{"private": False, "tags": ["lerobot-ocr"]}]  # uploaded once, through LeRobot's own push_to_hub
+    assert pushed == [
+        {"private": False, "tags": ["lerobot-ocr"]}
+    ]  # uploaded once, through LeRobot's own push_to_hub
     # the saved episode (seed 0) was reused; only the interrupted attempt (seed 1) was recorded again
     assert recorded == [1]
     assert not (tmp_path / "ds.work").exists()  # the cache is cleaned up after a successful build

@@ -286,29 +286,3 @@ def test_a_new_batch_size_starts_new_episodes_and_reset_always_works(joint, id_p
     joint.reset()
     assert joint.completed_stats[-1]["started_ood"] == [False, True, False]
     assert joint.ocr_stats() == {"steps": 0}
-
-
-def test_a_misrotated_object_in_the_demos_place_is_left_to_the_base_with_a_handback_quantile(
-    diffusion_base, converted_dataset, id_pose
-):
-    """--policy.handback_quantile: the switch looks at where the object is, not how it is turned."""
-    joint = make_joint(diffusion_base, converted_dataset, handback_quantile=0.2)
-    q = joint.position_quantiles_
-    assert torch.isfinite(q).all() and (q[1:] >= q[:-1]).all()  # calibrated at training, percentiles
-    from lerobot_ocr.geometry import angle_to_matrix, matrix_to_pose
-    from lerobot_ocr.keypoints import keypoints_to_pose
-
-    kps = joint._keypoints(joint._pose_matrix(torch.tensor([id_pose])))[0].double()
-    centre = kps.mean(0)
-    turned = (kps - centre) @ angle_to_matrix(torch.tensor(torch.pi, dtype=torch.float64)).T + centre
-    upside_down = matrix_to_pose(keypoints_to_pose(turned[None], joint.object_keypoints_.double()), "angle")
-    upside_down = upside_down[0].tolist()  # the demos' place (the keypoints' centre), turned half a turn
-    for quantile, recovers in ((None, True), (0.2, False)):
-        joint.config.handback_quantile = quantile
-        joint.reset()
-        joint.select_action(observation([upside_down, OOD_POSE]))
-        assert joint.ocr_stats()["in_recovery"][-1].tolist() == [recovers, True]
-    joint.position_quantiles_.fill_(float("nan"))  # a checkpoint trained before the calibration existed
-    joint.reset()
-    with pytest.raises(ValueError, match="handback_quantile needs the position calibration"):
-        joint.select_action(observation([OOD_POSE]))

@@ -67,22 +67,3 @@ def test_when_a_check_is_needed():
 def test_decide_rejects_scores_for_other_rows():
     with pytest.raises(ValueError, match="one per row"):
         decide(torch.zeros(3), 0.0, SwitchState.start(2))
-
-
-def test_with_a_position_test_rows_hand_back_only_deep_and_deep_rows_stay_on_the_base():
-    """--policy.handback_quantile: hand back once deep (whatever the score), never enter while deep."""
-    state = SwitchState(
-        torch.tensor([True, True, False, False]), torch.zeros(4, dtype=torch.long),
-        torch.ones(4, dtype=torch.long), torch.zeros(4, dtype=torch.bool),
-    )  # fmt: skip
-    score = torch.tensor([1.0, -1.0, -1.0, -1.0], dtype=torch.float64)  # threshold 0
-    deep = torch.tensor([False, True, True, False])
-    d = decide(score, 0.0, state, deep)
-    assert d.hand_back.tolist() == [False, True, False, False]  # row 0: above the threshold but not deep yet
-    assert d.recovering.tolist() == [True, False, False, True]  # row 2: misrotated but deep: the base's
-    assert d.enter.tolist() == [False, False, False, True] and d.needs_chunk.tolist() == [
-        True,
-        False,
-        False,
-        True,
-    ]

@@ -35,16 +35,6 @@ from lerobot_ocr.files import atomic_write
 from lerobot_ocr.validation import check_finite, check_trailing_shape
 
 
-def _nudges(dim: int, angle: float, dtype, device) -> torch.Tensor:
-    """(P, dim, dim) small turns by +-angle: about the axis in 2D, about each coordinate axis in 3D."""
-    from lerobot_ocr.geometry.rotations import angle_to_matrix, axis_angle_to_matrix
-
-    if dim == 2:
-        return angle_to_matrix(torch.tensor([angle, -angle], dtype=dtype, device=device))
-    axes = torch.cat((torch.eye(3, dtype=dtype, device=device), -torch.eye(3, dtype=dtype, device=device)))
-    return axis_angle_to_matrix(axes * angle)
-
-
 class NotFittedError(ValueError, AttributeError):
     """The manifold was used before `fit`/`calibrate` (sklearn's bases; sklearn itself loads lazily)."""
 
@@ -323,55 +313,6 @@ class KeypointManifold(nn.Module):
         """(..., K, D) -> (...,) OOD score by `score_type`; higher means more in distribution."""
         return self._aggregate(self.log_density(keypoints))
 
-    def best_score_over_rotations(
-        self,
-        keypoints: torch.Tensor | np.ndarray,
-        rotations: torch.Tensor,
-        refine: int = 6,
-        starts: int = 3,
-        chunk: int = 2048,
-    ) -> torch.Tensor:
-        """(..., K, D) keypoints, (R, D, D) rotations -> (...,) the best score of the keypoint set turned
-        about its centre: how deep in the data its POSITION is, whatever its orientation (a T in the
-        demos' place but upside down scores as high as the demos there).
-
-        The turns tried: the grid `rotations`, then `refine` rounds of a local search around its best
-        `starts` turns (half the step each round: +-step about each axis), so a sharp density is not
-        missed between grid points.
-
-        Raises:
-            ValueError / NotFittedError: as `score`.
-        """
-        x = self._prepare(keypoints)
-        grid = torch.as_tensor(rotations, dtype=x.dtype, device=x.device)
-        d = grid.shape[-1]
-        flat = x.reshape(-1, *x.shape[-2:])
-        step = 2 * math.pi / len(grid) if d == 2 else (8 * math.pi**2 / len(grid)) ** (1 / 3)
-        out = []
-        for part in flat.split(chunk):
-            centre = part.mean(-2, keepdim=True)
-            local = part - centre
-
-            def scores(rot):  # rot (n, M, D, D) -> (n, M)
-                return self.score(torch.einsum("nmij,nkj->nmki", rot, local) + centre.unsqueeze(1))
-
-            s = scores(grid.expand(len(part), *grid.shape))
-            top = s.topk(min(starts, len(grid)), dim=-1)  # refine the best few grid turns (several basins)
-            best, best_rot = top.values, grid[top.indices]  # (n, S), (n, S, D, D)
-            h = step
-            for _ in range(refine):
-                h /= 2
-                nudges = _nudges(d, h, x.dtype, x.device)  # (P, D, D)
-                candidates = best_rot.unsqueeze(2) @ nudges  # (n, S, P, D, D)
-                s = scores(candidates.flatten(1, 2)).unflatten(1, candidates.shape[1:3])  # (n, S, P)
-                value, index = s.max(-1)
-                better = value > best
-                best = torch.where(better, value, best)
-                picked = torch.take_along_dim(candidates, index[..., None, None, None], dim=2).squeeze(2)
-                best_rot = torch.where(better[..., None, None], picked, best_rot)
-            out.append(best.max(-1).values)
-        return torch.cat(out).reshape(x.shape[:-2])
-
     # ----------------------------------------------------------------------------- calibration
     def calibrate(self, keypoints: torch.Tensor | np.ndarray, quantile: float = 0.02) -> KeypointManifold:
         """Set the OOD threshold to the `quantile` of in-distribution scores; return self.
@@ -420,12 +361,8 @@ class KeypointManifold(nn.Module):
         phi: float = 5500.0,
         eta: float = 1100.0,
         temperature: float = 2.0,
-        deeper: bool = False,
     ) -> RecoveryOutput:
         """Recovery vectors toward the data for (..., K, D) keypoints, in one vectorised pass.
-
-        deeper: also give in-distribution sets a direction (where "log_deficit" is zero there, the
-        "paper" magnitude's), for recoveries that go on inside the data (`handback_quantile`).
 
         Per keypoint, delta_k = m_k * u_k with u_k the unit gradient of log p_k (zero where the
         gradient is exactly zero). The magnitude m_k is:
@@ -461,7 +398,7 @@ class KeypointManifold(nn.Module):
                 raise NotFittedError("The 'log_deficit' magnitude needs calibrate(keypoints) first.")
             mag = torch.tanh(torch.clamp(self.keypoint_log_thresholds_ - log_p, min=0.0) / temperature)
             per_kp = mag.unsqueeze(-1) * unit
-            weak = (is_ood | deeper) & (torch.linalg.vector_norm(per_kp.mean(-2), dim=-1) < 1e-9)
+            weak = is_ood & (torch.linalg.vector_norm(per_kp.mean(-2), dim=-1) < 1e-9)
             per_kp = torch.where(weak[..., None, None], paper, per_kp)
         return RecoveryOutput(per_kp.mean(-2), per_kp, log_p, score, is_ood)
 

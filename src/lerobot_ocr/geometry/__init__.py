@@ -32,7 +32,6 @@ from lerobot_ocr.geometry.rotations import (
     matrix_to_rotation_6d,
     quaternion_to_matrix,
     rotation_6d_to_matrix,
-    rotation_grid,
     wrap_angle,
 )
 
@@ -57,7 +56,6 @@ __all__ = [
     "quaternion_to_matrix",
     "relative",
     "rotation_6d_to_matrix",
-    "rotation_grid",
     "rotation_part",
     "se2_compose",
     "se2_inverse",

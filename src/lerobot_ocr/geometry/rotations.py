@@ -10,7 +10,6 @@ Conventions:
 
 from __future__ import annotations
 
-import numpy as np
 import torch
 
 from lerobot_ocr.geometry._backend import numpy_compatible
@@ -152,22 +151,3 @@ def matrix_to_angle(matrix: torch.Tensor) -> torch.Tensor:
 def wrap_angle(theta: torch.Tensor) -> torch.Tensor:
     """Wrap angles to [-pi, pi)."""
     return torch.remainder(theta + torch.pi, 2 * torch.pi) - torch.pi
-
-
-def rotation_grid(dim: int, n: int = 24) -> torch.Tensor:
-    """(n, dim, dim) rotations spread over SO(dim), deterministic: the identity first.
-
-    SE(2): n angles 2 pi k / n. SE(3): the identity and n - 1 rotations drawn uniformly with a fixed seed
-    (scipy's `Rotation.random`), so a search over orientations sees the same grid on every machine.
-
-    Raises:
-        ValueError: dim not 2 or 3, or n < 1.
-    """
-    if dim not in (2, 3) or n < 1:
-        raise ValueError(f"rotation_grid needs dim 2 or 3 and n >= 1, got dim={dim}, n={n}.")
-    if dim == 2:
-        return angle_to_matrix(torch.arange(n, dtype=torch.float64) * (2 * torch.pi / n))
-    from scipy.spatial.transform import Rotation
-
-    mats = Rotation.random(n - 1, random_state=0).as_matrix() if n > 1 else np.zeros((0, 3, 3))
-    return torch.cat((torch.eye(3, dtype=torch.float64)[None], torch.as_tensor(mats, dtype=torch.float64)))

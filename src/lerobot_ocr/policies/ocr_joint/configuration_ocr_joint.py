@@ -51,10 +51,6 @@ class OcrJointConfig(PreTrainedConfig):
         calibration_quantile: share of training frames below the calibrated threshold. Default 0.02.
         threshold_margin: nats subtracted from the calibrated threshold (start frames are the rarest
             frames of a demo set; the margin keeps unseen ID starts on the base). Default 2.0.
-        handback_quantile: None (default) = hand back once the score is above the threshold again;
-            q in (0, 1) = hand back only once the object's position is as deep in the data as the
-            q-quantile of the training frames, whatever its orientation (the best score over turns of
-            the object), and leave such rows on the base. Can be changed at eval time.
     Recovery
         magnitude: recovery vector magnitude, "log_deficit" (default) or "paper" (q(|grad p|)).
         step_size: alpha, object units the planned keypoints move per frame. Default 5.0.
@@ -93,7 +89,6 @@ class OcrJointConfig(PreTrainedConfig):
     threshold: float | None = None
     calibration_quantile: float = 0.02
     threshold_margin: float = 2.0
-    handback_quantile: float | None = None
 
     # Recovery vector and planner.
     magnitude: str = "log_deficit"
@@ -155,10 +150,6 @@ class OcrJointConfig(PreTrainedConfig):
             )
         if not 1 <= self.n_recovery_action_steps <= self.horizon:
             raise ValueError(f"--policy.n_recovery_action_steps must be in [1, horizon={self.horizon}].")
-        if self.handback_quantile is not None and not 0 < self.handback_quantile < 1:
-            raise ValueError(
-                f"--policy.handback_quantile must be in (0, 1) or None, got {self.handback_quantile}."
-            )
         if self.ema_power is not None and not self.ema_power > 0:
             raise ValueError(f"--policy.ema_power must be > 0 or None, got {self.ema_power}.")
         if not self.reg_covar > 0:

@@ -49,7 +49,7 @@ from lerobot_ocr.base_policy import (
 )
 from lerobot_ocr.dataset_columns import episode_last_positions, read_columns, window_positions
 from lerobot_ocr.ema import ema_model
-from lerobot_ocr.geometry import pose_defects, pose_to_matrix, rotation_grid
+from lerobot_ocr.geometry import pose_defects, pose_to_matrix
 from lerobot_ocr.inverse_policy import KeypointInversePolicy
 from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
 from lerobot_ocr.manifold import KeypointManifold, RecoveryOutput
@@ -114,13 +114,6 @@ class OcrJointPolicy(PreTrainedPolicy):
         # The threshold calibrated on the training frames, before `threshold_margin` (so it can change at
         # eval).
         self.register_buffer("calibrated_threshold_", torch.tensor(float("nan"), dtype=torch.float64))
-        # Percentiles 0..100 of the training frames' position scores (`handback_quantile`); the turns tried.
-        self.register_buffer("position_quantiles_", torch.full((101,), float("nan"), dtype=torch.float64))
-        self.register_buffer(
-            "rotations_",
-            rotation_grid(config.object_dim, 24 if config.object_dim == 2 else 64),
-            persistent=False,
-        )
         k, d = local.shape
         state_dim = config.input_features[config.state_key].shape[0]
         action_dim = config.output_features[ACTION].shape[0]
@@ -301,12 +294,6 @@ class OcrJointPolicy(PreTrainedPolicy):
         self.apply_threshold()
         n = len(self._tbl_index)
         gen = torch.Generator().manual_seed(0)
-        sample = self._tbl_keypoints[torch.randperm(n, generator=gen)[:1000]].double()
-        position = self.manifold.best_score_over_rotations(sample, self.rotations_)
-        self.position_quantiles_.copy_(
-            torch.quantile(position, torch.linspace(0, 1, 101, dtype=torch.float64))
-        )
-        gen = torch.Generator().manual_seed(0)
         starts = torch.randperm(n, generator=gen)[: cfg.max_normalization_windows]
         w = self._windows(starts)
         kp, st, act = self.inverse.to_object_frame(w["keypoints"], w["state"], w["frame"], w["actions"])
@@ -408,9 +395,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             frames,
             keypoints,
             state,
-            self.manifold.recovery(
-                keypoints.double(), magnitude=cfg.magnitude, deeper=cfg.handback_quantile is not None
-            ),
+            self.manifold.recovery(keypoints.double(), magnitude=cfg.magnitude),
         )
 
     def _distance(self, state: torch.Tensor, keypoints: torch.Tensor) -> torch.Tensor:
@@ -436,11 +421,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         policy's initial noise (None: sampled).
         """
         if recovery is None:
-            recovery = self.manifold.recovery(
-                keypoints.double(),
-                magnitude=self.config.magnitude,
-                deeper=self.config.handback_quantile is not None,
-            )
+            recovery = self.manifold.recovery(keypoints.double(), magnitude=self.config.magnitude)
         plan = self.planner(keypoints, recovery.vector.to(keypoints.dtype), self._distance(state, keypoints))
         return self.inverse.sample(plan, state, frames, noise=noise), plan
 
@@ -459,7 +440,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             self._new_chunks = None
             return self._unchecked
         score = obs.recovery.score.to(device)
-        decision = decide(score, float(self.manifold.threshold_), self._switch, self._deep(obs))
+        decision = decide(score, float(self.manifold.threshold_), self._switch)
         if bool(decision.needs_chunk.any()):
             self._plan_chunks(obs, decision.needs_chunk, noise)
         if bool(decision.hand_back.any()):
@@ -491,21 +472,6 @@ class OcrJointPolicy(PreTrainedPolicy):
                 f"observation): {wrong}. Check the env / robot settings (image size, state layout)."
             )
         self._base_inputs_checked = True
-
-    def _deep(self, obs: Observed) -> torch.Tensor | None:
-        """(B,) bool: the object's position is deep in the data, whatever its turn (`handback_quantile`)."""
-        q = self.config.handback_quantile
-        if q is None:
-            return None
-        if not bool(torch.isfinite(self.position_quantiles_).all()):
-            raise ValueError(
-                "--policy.handback_quantile needs the position calibration, which this checkpoint lacks "
-                "(trained before it existed): train it again, or leave handback_quantile unset."
-            )
-        grid = torch.linspace(0, 1, 101, dtype=torch.float64)
-        level = float(np.interp(q, grid.numpy(), self.position_quantiles_.cpu().numpy()))
-        position = self.manifold.best_score_over_rotations(obs.keypoints.double(), self.rotations_)
-        return position >= level
 
     def _mix(self, batch: dict[str, torch.Tensor], device: torch.device) -> torch.Tensor:
         """(B, A) actions: the base's for rows on the base, the current recovery action for the others."""
@@ -562,9 +528,6 @@ class OcrJointPolicy(PreTrainedPolicy):
         obs = self._observe(batch)
         self._check_base_inputs(batch)
         ood = obs.recovery.is_ood.to(obs.frames.device)
-        deep = self._deep(obs)
-        if deep is not None:  # as select_action: an object deep in the data is the base's, whatever its turn
-            ood = ood & ~deep.to(ood.device)
         base_chunk = self._base_post(predict_chunk(self.base, self._base_pre(dict(batch))))
         n = min(self.config.n_recovery_action_steps, base_chunk.shape[1])
         out = base_chunk[:, :n].to(obs.frames.device, torch.float32).clone()

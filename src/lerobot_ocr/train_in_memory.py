@@ -51,40 +51,8 @@ def cache_items(dataset) -> InMemoryDataset:
     return InMemoryDataset(dataset, items)
 
 
-def with_ema(lerobot_train, power: float) -> None:
-    """Train with an exponential moving average of the policy's weights (`lerobot_ocr.ema`): updated
-    after every optimizer step (lerobot-train calls a policy's `update()`), written into every
-    checkpoint in place of the raw weights (which the run keeps training)."""
-    from lerobot_ocr.ema import ema_model
-
-    make_policy, save_checkpoint = lerobot_train.make_policy, lerobot_train.save_checkpoint
-    averages = {}
-
-    def make_policy_with_ema(*args, **kwargs):
-        policy = make_policy(*args, **kwargs)
-        if hasattr(policy, "update"):
-            raise ValueError(f"{type(policy).__name__} has its own update(); --ocr.ema_power cannot wrap it.")
-        averages["ema"] = ema_model(policy, power)
-        policy.update = lambda: averages["ema"].update_parameters(policy)  # noqa: E731
-        return policy
-
-    def save_averaged(*args, policy, **kwargs):
-        raw = {k: v.detach().clone() for k, v in policy.state_dict().items()}
-        policy.load_state_dict(averages["ema"].module.state_dict())
-        try:
-            save_checkpoint(*args, policy=policy, **kwargs)
-        finally:
-            policy.load_state_dict(raw)
-
-    lerobot_train.make_policy, lerobot_train.save_checkpoint = make_policy_with_ema, save_averaged
-
-
 def main() -> None:
-    """`python -m lerobot_ocr.train_in_memory <lerobot-train args> [--ocr.ema_power=0.75]`.
-
-    Raises:
-        ValueError: an `--ocr.ema_power` that is not a number > 0.
-    """
+    """`python -m lerobot_ocr.train_in_memory <lerobot-train args>`."""
     from lerobot.scripts import lerobot_train
 
     from lerobot_ocr.cli import quiet_known_warnings
@@ -97,11 +65,7 @@ def main() -> None:
         return cache_items(dataset), eval_dataset
 
     lerobot_train.make_train_eval_datasets = make_cached
-    args = sys.argv[1:]
-    ema = [a.split("=", 1)[1] for a in args if a.startswith("--ocr.ema_power=")]
-    if ema:
-        with_ema(lerobot_train, float(ema[-1]))
-    sys.argv = ["lerobot-train", *(a for a in args if not a.startswith("--ocr.ema_power="))]
+    sys.argv = ["lerobot-train", *sys.argv[1:]]
     lerobot_train.main()
 
 

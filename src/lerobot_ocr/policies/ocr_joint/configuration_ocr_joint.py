@@ -61,9 +61,6 @@ class OcrJointConfig(PreTrainedConfig):
             reference's Push-T eval uses 12 of 16). Default None.
         n_recovery_action_steps: recovery actions executed per chunk before the row decides again.
             Default 8.
-        ema_power: train the inverse policy with an exponential moving average of its weights, decay
-            1 - (1 + step)^-power (Diffusion Policy's: 0.75); checkpoints hold the averaged weights.
-            None = off. Default None.
     Inverse policy: LeRobot's diffusion U-Net (`down_dims`, ...), DDIM with `num_inference_steps`
         steps by default; `max_normalization_windows` training windows fit its normalisation.
     """
@@ -98,7 +95,6 @@ class OcrJointConfig(PreTrainedConfig):
     d_max: float = 60.0
     fixed_delay: int | None = None
     n_recovery_action_steps: int = 8
-    ema_power: float | None = None
 
     # Keypoint inverse policy (LeRobot's diffusion U-Net).
     down_dims: tuple[int, ...] = (256, 512, 1024)
@@ -150,8 +146,6 @@ class OcrJointConfig(PreTrainedConfig):
             )
         if not 1 <= self.n_recovery_action_steps <= self.horizon:
             raise ValueError(f"--policy.n_recovery_action_steps must be in [1, horizon={self.horizon}].")
-        if self.ema_power is not None and not self.ema_power > 0:
-            raise ValueError(f"--policy.ema_power must be > 0 or None, got {self.ema_power}.")
         if not self.reg_covar > 0:
             raise ValueError(f"--policy.reg_covar must be > 0 (squared object units), got {self.reg_covar}.")
         if not self.d_max > self.d_min:

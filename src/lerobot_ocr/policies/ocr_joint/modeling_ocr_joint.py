@@ -48,7 +48,6 @@ from lerobot_ocr.base_policy import (
     queued_actions,
 )
 from lerobot_ocr.dataset_columns import episode_last_positions, read_columns, window_positions
-from lerobot_ocr.ema import ema_model
 from lerobot_ocr.geometry import pose_defects, pose_to_matrix
 from lerobot_ocr.inverse_policy import KeypointInversePolicy
 from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
@@ -189,15 +188,6 @@ class OcrJointPolicy(PreTrainedPolicy):
             self._load_training_table(dataset_meta.root)
             if not config.pretrained_path:
                 self._fit_from_table()
-        # Training: an exponential moving average of the inverse policy (`ema_power`), updated by `update()`.
-        ema = (
-            ema_model(self.inverse, config.ema_power)
-            if dataset_meta is not None and config.ema_power
-            else None
-        )
-        self._ema_holder = [
-            ema
-        ]  # a list: not a submodule, so its copy stays out of parameters() and state_dict()
         self.completed_stats: list[dict] = []
         self.reset()
 
@@ -216,13 +206,6 @@ class OcrJointPolicy(PreTrainedPolicy):
 
     def get_optim_params(self) -> dict:
         return self.inverse.parameters()
-
-    def update(self) -> None:
-        """After each optimizer step (lerobot-train calls it): update the inverse policy's moving average."""
-        ema = self._ema_holder[0]
-        if ema is not None:
-            ema.to(next(self.inverse.parameters()).device)  # follows the policy to its device
-            ema.update_parameters(self.inverse)
 
     # ------------------------------------------------------------------------------ training data
     def _load_training_table(self, root: str | Path) -> None:
@@ -567,9 +550,6 @@ class OcrJointPolicy(PreTrainedPolicy):
         self.config._save_pretrained(save_directory)
         sd = state_dict if state_dict is not None else self.state_dict()
         own = {k: v.contiguous() for k, v in sd.items() if not k.startswith(f"{BASE_DIR}.")}
-        ema = self._ema_holder[0]
-        if ema is not None and int(ema.n_averaged) > 0:  # the checkpoint holds the averaged inverse policy
-            own.update({f"inverse.{k}": v.detach().contiguous() for k, v in ema.module.state_dict().items()})
         total = sum(t.numel() * t.element_size() for t in own.values())
         save_torch_state_dict(own, str(save_directory), max_shard_size=max(total, 1))
         (save_directory / KEYPOINTS_FILE).write_text(json.dumps(self.object_keypoints_.tolist()))

@@ -186,11 +186,11 @@ def _rollout_batch(ctx: dict, seeds: list[int], keep: str, features: dict) -> li
         modes = np.zeros_like(success, dtype=bool)
     rows = []
     for b, n_steps in enumerate(steps[:n]):
-        n = kept_length(success[b], modes[b], n_steps, keep)
-        if n == 0:
+        kept = kept_length(success[b], modes[b], n_steps, keep)
+        if kept == 0:
             rows.append(None)
             continue
-        arrays = episode_arrays(data, b, n, modes[b], features)
+        arrays = episode_arrays(data, b, kept, modes[b], features)
         done = success[b, :n_steps]
         arrays["_success_step"] = np.array(int(done.argmax()) + 1 if done.any() else -1)
         back = modes[b, :n_steps]

@@ -36,7 +36,18 @@ REPO = HERE.parent
 sys.path[:0] = [str(HERE), str(REPO / "src")]
 from results_md import update_section  # noqa: E402
 
-from lerobot_ocr.pipeline import BIN, CELLS, TASKS, Stages, eval_args, run, run_chain, trainer  # noqa: E402
+from lerobot_ocr.pipeline import (  # noqa: E402
+    BIN,
+    CELLS,
+    TASKS,
+    Stages,
+    eval_args,
+    run,
+    run_chain,
+    save_freq,
+    train,
+    trainer,
+)  # noqa: E402
 
 # Our stages' settings per profile (the chain's come from the task's profile of the same name).
 PROFILES = {
@@ -102,7 +113,7 @@ def finetune_args(p: dict, base_ckpt: Path, data: Path, repo_id: str, out: Path)
         f"--batch_size={p['base_batch']}",
         "--num_workers=0",
         "--env_eval_freq=0",
-        f"--save_freq={p['ft_steps']}",
+        f"--save_freq={save_freq(p['ft_steps'])}",
         "--log_freq=500",
         "--seed=1000",
         f"--output_dir={out}",
@@ -189,8 +200,7 @@ def main() -> None:
         out = here / f"base_{name}"
 
         def finetune(out=out, root=root, repo=repo, name=name):
-            shutil.rmtree(out, ignore_errors=True)
-            run(finetune_args(p, chain.base_ckpt, root, repo, out), logs / f"ft_{name}.log")
+            train(finetune_args(p, chain.base_ckpt, root, repo, out), out, logs / f"ft_{name}.log")
 
         stage(f"ft_{name}", finetune)
         ckpts[name] = out / "checkpoints" / "last" / "pretrained_model"

@@ -97,7 +97,7 @@ def body() -> str:
     return (
         "Success rate [95% Wilson interval] per cell; ID / OOD = the object starts inside / outside the "
         "demonstrations' region; base = the policy alone, joint = `ocr_joint` wrapping it. The cells count "
-        "success within 400 steps (strict); \"reference budget\" counts it within the reference's joint "
+        'success within 400 steps (strict); "reference budget" counts it within the reference\'s joint '
         "protocol (60 policy decisions on Push-T, 30 on Square, no step cap), the budget of the paper's "
         "joint OOD number. Recovery efficiency = joint OOD ÷ base ID, both within the reference budget "
         "(the paper: 0.93 / 0.90 ≈ 1.03). The paper's Push-T base is an image diffusion policy trained on "

@@ -34,3 +34,33 @@ def test_failed_stage_raises_with_the_log_tail(tmp_path):
     with pytest.raises(RuntimeError, match="stage-went-wrong"):
         ocr_pipeline.run([sys.executable, "-c", "import sys; print('stage-went-wrong'); sys.exit(3)"], log)
     assert "stage-went-wrong" in log.read_text()
+
+
+def test_a_training_stage_resumes_from_its_last_checkpoint(tmp_path):
+    """An interrupted training stage goes on from its last checkpoint (lerobot-train --resume), not from 0."""
+    from lerobot_ocr.pipeline import save_freq, train
+
+    calls = tmp_path / "calls.txt"
+    fake = tmp_path / "fake_trainer.py"  # stands in for lerobot-train: records its flags, then "checkpoints"
+    fake.write_text(
+        "import pathlib, sys\n"
+        f"pathlib.Path({str(calls)!r}).open('a').write(' '.join(sys.argv[1:]) + '\\n')\n"
+        "out = [a.split('=', 1)[1] for a in sys.argv if a.startswith('--output_dir=')]\n"
+        "if out:\n"
+        "    ckpt = pathlib.Path(out[0]) / 'checkpoints' / 'last' / 'pretrained_model'\n"
+        "    ckpt.mkdir(parents=True)\n"
+        "    (ckpt / 'train_config.json').write_text('{}')\n"
+        "    sys.exit(1)  # killed after its first checkpoint\n"
+    )
+    out, log = tmp_path / "train", tmp_path / "logs" / "train.log"
+    args = [sys.executable, str(fake), "--steps=60000", f"--output_dir={out}"]
+    with pytest.raises(RuntimeError):
+        train(args, out, log)
+    train(args, out, log)  # the re-run resumes
+    first, second = calls.read_text().splitlines()
+    assert first == f"--steps=60000 --output_dir={out}"
+    assert (
+        second == f"--resume=true --config_path={out / 'checkpoints/last/pretrained_model/train_config.json'}"
+    )
+    assert (tmp_path / "logs" / "train.resumed.log").is_file()
+    assert save_freq(60000) == 5000 and save_freq(2000) == 666 and save_freq(2) == 1

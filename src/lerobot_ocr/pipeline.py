@@ -141,6 +141,31 @@ def trainer(p: dict) -> list[str]:
     return [str(BIN / "lerobot-train")]
 
 
+SAVE_EVERY = 5000  # training steps between checkpoints: an interrupted stage loses at most this many
+
+
+def save_freq(steps: int) -> int:
+    """Checkpoint interval of a training stage of `steps` steps (a third of it, at most SAVE_EVERY)."""
+    return max(1, min(SAVE_EVERY, steps // 3))
+
+
+def train(args: list[str], out: Path, log: Path) -> None:
+    """Run the training command `args` (a trainer from `trainer()` and lerobot-train flags writing to
+    `out`), resuming mid-stage: when `out` holds a checkpoint, lerobot-train `--resume`s from its last
+    one (same config, optimizer and step), so an interruption loses at most `save_freq` steps.
+
+    Raises:
+        RuntimeError: the command failed (see `run`).
+    """
+    config = out / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
+    if config.is_file():
+        prefix = [a for a in args if not a.startswith("--")]  # the trainer: executable (+ -m module)
+        run([*prefix, "--resume=true", f"--config_path={config}"], log.with_suffix(".resumed.log"))
+        return
+    shutil.rmtree(out, ignore_errors=True)
+    run(args, log)
+
+
 def base_train_args(
     p: dict, data: Path, out: Path, task: Task | None = None, repo_id: str = "local/base"
 ) -> list[str]:
@@ -162,7 +187,7 @@ def base_train_args(
         f"--batch_size={p['base_batch']}",
         "--num_workers=0",
         "--env_eval_freq=0",
-        f"--save_freq={max(1, p['base_steps'] // 3)}",
+        f"--save_freq={save_freq(p['base_steps'])}",
         "--log_freq=500",
         "--seed=1000",
         f"--output_dir={out}",
@@ -243,8 +268,7 @@ def run_chain(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> Chai
     base_out = work / "base"
 
     def train_base():
-        shutil.rmtree(base_out, ignore_errors=True)
-        run(base_train_args(p, base_data, base_out, task, base_repo), logs / "base_train.log")
+        train(base_train_args(p, base_data, base_out, task, base_repo), base_out, logs / "base_train.log")
 
     stage("base_train", train_base)
     base_ckpt = base_out / "checkpoints" / "last" / "pretrained_model"
@@ -267,8 +291,7 @@ def run_chain(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> Chai
     ocr_out = work / "ocr"
 
     def train_ocr():
-        shutil.rmtree(ocr_out, ignore_errors=True)
-        run(
+        train(
             [
                 *trainer(p),
                 f"--config_path={CONFIGS / task.policy_config}",
@@ -280,11 +303,12 @@ def run_chain(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> Chai
                 f"--steps={p['ocr_steps']}",
                 f"--batch_size={p['ocr_batch']}",
                 "--num_workers=0",
-                f"--save_freq={p['ocr_steps']}",
+                f"--save_freq={save_freq(p['ocr_steps'])}",
                 "--log_freq=500",
                 "--seed=1000",
                 f"--output_dir={ocr_out}",
             ],
+            ocr_out,
             logs / "ocr_train.log",
         )
 

@@ -287,7 +287,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--pose-from",
         required=True,
         help="Pose source: feature:<name> (a pose feature), keypoints:<name> (flattened world keypoints, "
-        "rigidly fitted), or estimator:<module>:<function> (called on every decoded frame).",
+        "rigidly fitted), estimator:<module>:<function> (called on every decoded frame), or "
+        "state:<prefix> / state:<name>,<name> (entries of observation.state, e.g. state:object_).",
     )
     conv.add_argument("--output-root", required=True, help="Folder of the converted dataset.")
     conv.add_argument(

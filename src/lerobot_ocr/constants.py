@@ -8,6 +8,7 @@ import numpy as np
 # Features that `lerobot-ocr convert` adds and that the `ocr_joint` policy and our envs use.
 OBS_OBJECT_POSE = "observation.object_pose"  # (P,) object pose, world frame (see `pose_rotation`)
 OBS_OBJECT_KEYPOINTS = "observation.object_keypoints"  # (K*D,) world keypoints, flattened
+OBS_STATE = "observation.state"  # LeRobot's robot state key
 
 # Task strings of our sim envs (LeRobot passes them to language-conditioned policies as `task`).
 PUSHT_TASK = "Push the T-shaped block onto the T-shaped target."

@@ -10,7 +10,12 @@ Pose sources (`pose_from`):
 - "keypoints:<name>"          a feature of flattened world keypoints in the `source_keypoints`
                               layout (e.g. the hub's `pusht_keypoints` corners), rigidly fitted;
 - "estimator:<module>:<fn>"   a user callable fn(frame: dict) -> pose vector, called on every decoded
-                              frame (images included), e.g. a pose estimator; or pass the callable.
+                              frame (images included), e.g. a pose estimator; or pass the callable;
+- "state:<prefix>" or "state:<name>,<name>,..."   entries of `observation.state` picked by name (a robot
+                              dataset recorded with the pose in its state, e.g. `object_x.pos`, ...):
+                              `meta/ocr_object.json` then records their indices (`state_pose_index`)
+                              and the others' (`robot_state_index`), which `ocr_joint` reads at run time
+                              when the observation has no `observation.object_pose` (`lerobot-rollout`).
 
 Safe: the dataset is built in `<output>.tmp/` and renamed when complete; estimator poses are cached
 in `<output>.work/` as they come, so an interrupted conversion resumes.
@@ -27,7 +32,7 @@ import numpy as np
 from tqdm import tqdm
 
 from lerobot_ocr.callables import load_callable
-from lerobot_ocr.constants import OBS_OBJECT_KEYPOINTS, OBS_OBJECT_POSE
+from lerobot_ocr.constants import OBS_OBJECT_KEYPOINTS, OBS_OBJECT_POSE, OBS_STATE
 from lerobot_ocr.dataset_columns import read_columns
 from lerobot_ocr.files import atomic_save_npy, check_output
 from lerobot_ocr.geometry import matrix_to_pose, pose_defects, pose_size, pose_to_matrix
@@ -96,8 +101,40 @@ def _poses_from_estimator(dataset, estimator: Callable, rotation: str, work: Pat
     return poses
 
 
+def state_names(features: dict) -> list[str]:
+    """The entry names of `observation.state` (a list, or LeRobot's {"motors": [...]} form); [] if none."""
+    names = features.get(OBS_STATE, {}).get("names")
+    if isinstance(names, dict):
+        names = next(iter(names.values()), []) if len(names) == 1 else []
+    return [str(n) for n in names or []]
+
+
+def state_pose_index(spec: str, features: dict, repo_id: str) -> list[int]:
+    """Indices into `observation.state` of a `state:<prefix>` or `state:<name>,<name>,...` pose source.
+
+    Raises:
+        ValueError: the state has no entry names, or none / not all of the asked entries.
+    """
+    names = state_names(features)
+    if not names:
+        raise ValueError(
+            f"Dataset {repo_id}'s {OBS_STATE} has no entry names, so --pose-from state:{spec} cannot pick "
+            "entries: use --pose-from feature:<name> or estimator:<module>:<fn>."
+        )
+    if "," in spec:
+        missing = [n for n in spec.split(",") if n not in names]
+        if missing:
+            raise ValueError(f"{OBS_STATE} of {repo_id} has no entries {missing}; its entries: {names}.")
+        return [names.index(n) for n in spec.split(",")]
+    index = [i for i, n in enumerate(names) if n.startswith(spec)]
+    if not index:
+        raise ValueError(f"No entry of {repo_id}'s {OBS_STATE} starts with {spec!r}; its entries: {names}.")
+    return index
+
+
 def source_feature(pose_from: str | Callable, features: dict, repo_id: str) -> str | None:
-    """The feature a `feature:`/`keypoints:` pose source reads (None for an estimator); validates it.
+    """The feature a `feature:`/`keypoints:`/`state:` pose source reads (None for an estimator);
+    validates it.
 
     Raises:
         ValueError: an unknown pose source.
@@ -106,11 +143,15 @@ def source_feature(pose_from: str | Callable, features: dict, repo_id: str) -> s
     if callable(pose_from) or str(pose_from).startswith("estimator:"):
         return None
     kind, _, name = str(pose_from).partition(":")
-    if kind not in ("feature", "keypoints") or not name:
+    if kind not in ("feature", "keypoints", "state") or not name:
         raise ValueError(
-            f"Unknown --pose-from {pose_from!r}: use 'feature:<name>', 'keypoints:<name>' or "
-            "'estimator:<module>:<fn>'."
+            f"Unknown --pose-from {pose_from!r}: use 'feature:<name>', 'keypoints:<name>', "
+            "'state:<prefix>' or 'estimator:<module>:<fn>'."
         )
+    if kind == "state":
+        _feature_info(features, OBS_STATE, repo_id)
+        state_pose_index(name, features, repo_id)
+        return OBS_STATE
     _feature_info(features, name, repo_id)
     return name
 
@@ -122,10 +163,12 @@ def compute_object_poses(
     source_keypoints: np.ndarray,
     work: Path,
     dataset=None,
+    state_index: list[int] | None = None,
 ) -> np.ndarray:
     """(N, P) object poses of every frame in the dataset's file order, from the chosen source.
 
-    `columns` holds the source feature's column (see `source_feature`), read with `read_columns`.
+    `columns` holds the source feature's column (see `source_feature`), read with `read_columns`;
+    `state_index`: the entries of `observation.state` a `state:` source reads (`state_pose_index`).
 
     Raises:
         ValueError: the feature's size does not fit the keypoint layout or the pose representation,
@@ -135,7 +178,11 @@ def compute_object_poses(
         fn = pose_from if callable(pose_from) else load_callable(str(pose_from).split(":", 1)[1], "estimator")
         return _poses_from_estimator(dataset, fn, rotation, work)
     kind, _, name = str(pose_from).partition(":")
-    values = columns[name].astype(np.float64).reshape(len(columns[name]), -1)
+    if kind == "state":
+        kind, name = "feature", f"{OBS_STATE} entries {state_index}"
+        values = columns[OBS_STATE].astype(np.float64).reshape(len(columns[OBS_STATE]), -1)[:, state_index]
+    else:
+        values = columns[name].astype(np.float64).reshape(len(columns[name]), -1)
     if kind == "feature":
         if values.shape[1] != pose_size(rotation):
             raise ValueError(
@@ -208,7 +255,9 @@ def convert_dataset(
     source = source_feature(pose_from, features, repo_id)
     has_pose = OBS_OBJECT_POSE in features
     columns = read_columns(dataset.root, [k for k in (source, OBS_OBJECT_POSE if has_pose else None) if k])
-    poses = compute_object_poses(columns, pose_from, rotation, src_kps, work, dataset)
+    from_state = str(pose_from).startswith("state:")
+    pose_index = state_pose_index(str(pose_from)[len("state:") :], features, repo_id) if from_state else None
+    poses = compute_object_poses(columns, pose_from, rotation, src_kps, work, dataset, pose_index)
     _check_poses(poses, rotation, columns["episode_index"], columns["frame_index"], str(pose_from))
     keypoints = pose_to_keypoints(pose_to_matrix(poses, rotation), local)  # (N, K, D) world
 
@@ -241,12 +290,12 @@ def convert_dataset(
     out_id = output_repo_id or f"{repo_id}_ocr"
     converted = add_features(dataset, new, output_dir=staging, repo_id=out_id)
     recompute_stats(converted)
-    (staging / "meta" / "ocr_object.json").write_text(
-        json.dumps(
-            {"object_keypoints": local.tolist(), "pose_rotation": rotation, "pose_from": str(pose_from)},
-            indent=2,
-        )
-    )
+    info = {"object_keypoints": local.tolist(), "pose_rotation": rotation, "pose_from": str(pose_from)}
+    if pose_index is not None:  # what ocr_joint reads from the state when there is no pose feature
+        size = features[OBS_STATE]["shape"][0]
+        info["state_pose_index"] = pose_index
+        info["robot_state_index"] = [i for i in range(size) if i not in pose_index]
+    (staging / "meta" / "ocr_object.json").write_text(json.dumps(info, indent=2))
     if output_root.exists():
         shutil.rmtree(output_root)
     staging.replace(output_root)

@@ -38,7 +38,15 @@ class OcrJointConfig(PreTrainedConfig):
         state_key: the robot state feature. state_frame / action_frame: how state and actions move
             with the object frame ("point", "pose:<rotation>", "none"; `lerobot_ocr.object_frame`).
         ee_position_start: the end effector's position is state[start:start+D] (for the delay
-            ramp's distance); None = distance 0 (the plan moves at once). Default 0.
+            ramp's distance; an index into the robot part of the state, see `state_index`); None =
+            distance 0 (the plan moves at once). Default 0.
+        object_pose_state_index: robot datasets that carry the object pose inside the state
+            (`lerobot-ocr convert --pose-from state:<prefix>`, e.g. `object_x.pos`, ...): the state entries
+            read as the pose when an observation has no `object_pose_key` (as under `lerobot-rollout`,
+            which packs every robot scalar into `observation.state`). Filled from the dataset's
+            `meta/ocr_object.json` at training. Default None.
+        state_index: the state entries the inverse policy sees (the robot's own; filled with the others
+            than the pose's at training, like `object_pose_state_index`). None = all. Default None.
     Manifold and switch
         n_components: Gaussian components per keypoint. Default 4.
         covariance_type: scikit-learn's GaussianMixture covariance type. Default "full".
@@ -74,6 +82,8 @@ class OcrJointConfig(PreTrainedConfig):
     pose_rotation: str = "angle"
     object_keypoints: str = "pusht_t"
     state_key: str = OBS_STATE
+    object_pose_state_index: list[int] | None = None
+    state_index: list[int] | None = None
     state_frame: str = "point"
     action_frame: str = "point"
     ee_position_start: int | None = 0
@@ -181,6 +191,20 @@ class OcrJointConfig(PreTrainedConfig):
             )
         if ACTION not in self.output_features:
             raise ValueError("The dataset has no `action` feature.")
+        state_size = self.input_features[self.state_key].shape[-1]
+        for name in ("object_pose_state_index", "state_index"):
+            index = getattr(self, name)
+            if index is not None and (not index or not all(0 <= int(i) < state_size for i in index)):
+                raise ValueError(
+                    f"--policy.{name}={index} must list entries of {self.state_key} (0..{state_size - 1})."
+                )
+        if self.object_pose_state_index is not None and len(self.object_pose_state_index) != pose_size(
+            self.pose_rotation
+        ):
+            raise ValueError(
+                f"--policy.object_pose_state_index has {len(self.object_pose_state_index)} entries but "
+                f"pose_rotation={self.pose_rotation!r} needs {pose_size(self.pose_rotation)}."
+            )
         size = self.input_features[self.object_pose_key].shape[-1]
         if size != pose_size(self.pose_rotation):
             raise ValueError(

@@ -96,6 +96,8 @@ class OcrJointPolicy(PreTrainedPolicy):
         **kwargs,
     ):
         super().__init__(config)
+        if dataset_meta is not None and not config.pretrained_path:
+            self._state_layout_from(Path(dataset_meta.root) / "meta" / "ocr_object.json")
         config.validate_features()
         self.config = config
         bundled_keypoints = Path(bundle_dir) / KEYPOINTS_FILE if bundle_dir is not None else None
@@ -114,7 +116,11 @@ class OcrJointPolicy(PreTrainedPolicy):
         # eval).
         self.register_buffer("calibrated_threshold_", torch.tensor(float("nan"), dtype=torch.float64))
         k, d = local.shape
-        state_dim = config.input_features[config.state_key].shape[0]
+        state_dim = (
+            len(config.state_index)
+            if config.state_index
+            else config.input_features[config.state_key].shape[0]
+        )
         action_dim = config.output_features[ACTION].shape[0]
         self.manifold = KeypointManifold(
             n_components=config.n_components,
@@ -192,6 +198,22 @@ class OcrJointPolicy(PreTrainedPolicy):
         self.reset()
 
     # ------------------------------------------------------------------------------ helpers
+    def _state_layout_from(self, info_file: Path) -> None:
+        """A dataset converted with `--pose-from state:<prefix>` says which state entries are the pose
+        and which the robot's: keep both in the config (saved in config.json), unless set already."""
+        if not info_file.is_file():
+            return
+        info = json.loads(info_file.read_text())
+        if self.config.object_pose_state_index is None and "state_pose_index" in info:
+            self.config.object_pose_state_index = [int(i) for i in info["state_pose_index"]]
+        if self.config.state_index is None and "robot_state_index" in info:
+            self.config.state_index = [int(i) for i in info["robot_state_index"]]
+
+    def _robot_state(self, state: torch.Tensor) -> torch.Tensor:
+        """(..., S) state -> the entries the inverse policy sees (`state_index`; all by default)."""
+        index = self.config.state_index
+        return state if not index else state[..., torch.as_tensor(index, device=state.device)]
+
     def _pose_matrix(self, pose: torch.Tensor) -> torch.Tensor:
         return pose_to_matrix(pose, self.config.pose_rotation)
 
@@ -251,7 +273,8 @@ class OcrJointPolicy(PreTrainedPolicy):
         )
         self.register_buffer("_tbl_frames", frames, **kw)
         self.register_buffer("_tbl_keypoints", self._keypoints(frames), **kw)
-        self.register_buffer("_tbl_state", torch.as_tensor(cols[cfg.state_key], dtype=torch.float32), **kw)
+        state = self._robot_state(torch.as_tensor(cols[cfg.state_key], dtype=torch.float32))
+        self.register_buffer("_tbl_state", state, **kw)
         self.register_buffer("_tbl_action", torch.as_tensor(cols[ACTION], dtype=torch.float32), **kw)
         self._has_table = True
 
@@ -358,19 +381,24 @@ class OcrJointPolicy(PreTrainedPolicy):
     def _observe(self, batch: dict[str, torch.Tensor]) -> Observed:
         """Pose -> keypoints -> score and recovery vector (one manifold evaluation for the batch)."""
         cfg = self.config
+        if cfg.object_pose_key not in batch and cfg.object_pose_state_index and cfg.state_key in batch:
+            state = batch[cfg.state_key]  # a robot observation: the pose travels inside the state
+            index = torch.as_tensor(cfg.object_pose_state_index, device=state.device)
+            batch = {**batch, cfg.object_pose_key: state[..., index]}
         if cfg.object_pose_key not in batch:
             raise KeyError(
                 f"The observation has no {cfg.object_pose_key!r} (keys: "
                 f"{sorted(k for k in batch if k.startswith('observation'))}). ocr_joint needs the object "
                 "pose at run time: use an env that exposes it (e.g. --env.type=pusht_ocr), a "
-                "pose-estimator processor, or set --policy.object_pose_key."
+                "pose-estimator processor, a dataset converted with --pose-from state:<prefix> (the pose "
+                "is then read from the robot state), or set --policy.object_pose_key."
             )
         pose = batch[cfg.object_pose_key].to(torch.float32)
         if pose.ndim == 1:
             pose = pose.unsqueeze(0)
         frames = self._pose_matrix(pose)  # rejects NaN/inf poses with a clear error
         keypoints = self._keypoints(frames)
-        state = batch[cfg.state_key].to(torch.float32).reshape(pose.shape[0], -1)
+        state = self._robot_state(batch[cfg.state_key].to(torch.float32).reshape(pose.shape[0], -1))
         check_finite(
             state, cfg.state_key, "The robot state is missing or invalid; check the robot's readings."
         )

@@ -154,7 +154,7 @@ def main() -> None:
                 f"--policy.device={p['device']}",
                 f"--seed={COLLECT_SEED}",
                 f"--max_attempts={20 * p['collect'] + 20}",
-                "--overwrite",
+                "--overwrite=true",
             ],
             logs / "collect.log",
         )

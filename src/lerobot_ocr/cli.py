@@ -318,7 +318,8 @@ def build_parser() -> argparse.ArgumentParser:
         "collect",
         help="Run a policy (ocr_joint for OCR collection) in a sim env and keep its episodes as a "
         "LeRobotDataset with the features of --like=<the base's dataset> (lerobot-eval's flags plus "
-        "--like, --root, --repo_id, --episodes, --keep=episode|recovery|all, --push_to_hub, --overwrite).",
+        "--like, --root, --repo_id, --episodes, --keep=episode|recovery|all, --push_to_hub=true, "
+        "--overwrite=true).",
         add_help=False,
     )
 

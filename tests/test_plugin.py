@@ -3,6 +3,8 @@
 import subprocess
 import sys
 
+import pytest
+
 
 def _run(code: str) -> str:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
@@ -87,3 +89,37 @@ def test_config_rejects_bad_recovery_settings():
         OcrJointConfig(device="cpu", n_recovery_action_steps=17)
     with pytest.raises(ValueError, match="Need d_max > d_min"):
         OcrJointConfig(device="cpu", d_min=5.0, d_max=5.0)
+
+
+def test_upgrade_removes_retired_options_so_old_checkpoints_load(tmp_path):
+    import dataclasses
+    import json
+
+    from lerobot_ocr.cli import main
+    from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
+    from lerobot_ocr.retired import RETIRED_OPTIONS
+
+    assert not set(RETIRED_OPTIONS) & {f.name for f in dataclasses.fields(OcrJointConfig)}
+    ckpt = tmp_path / "out" / "checkpoints" / "005000" / "pretrained_model"
+    ckpt.mkdir(parents=True)
+    config = {
+        "type": "ocr_joint",
+        "n_components": 3,
+        "plan": "translation",
+        "ema_power": None,
+        "latch": False,
+    }
+    (ckpt / "config.json").write_text(json.dumps(config))
+    (ckpt / "train_config.json").write_text(json.dumps({"steps": 5, "policy": dict(config)}))
+    (tmp_path / "out" / "base").mkdir()
+    (tmp_path / "out" / "base" / "config.json").write_text(json.dumps({"type": "diffusion", "plan": 1}))
+    assert main(["upgrade", str(tmp_path / "out")]) == 0
+    assert json.loads((ckpt / "config.json").read_text()) == {"type": "ocr_joint", "n_components": 3}
+    train = json.loads((ckpt / "train_config.json").read_text())
+    assert train == {"steps": 5, "policy": {"type": "ocr_joint", "n_components": 3}}
+    assert json.loads((tmp_path / "out" / "base" / "config.json").read_text())["plan"] == 1  # not ocr_joint's
+    from lerobot_ocr.retired import upgrade_checkpoint
+
+    assert upgrade_checkpoint(ckpt) == {}  # nothing left to remove
+    with pytest.raises(FileNotFoundError, match="No ocr_joint checkpoint"):
+        upgrade_checkpoint(tmp_path / "out" / "base")

@@ -186,6 +186,16 @@ def _rebase(args: argparse.Namespace) -> int:
     return 0
 
 
+def _upgrade(args: argparse.Namespace) -> int:
+    from lerobot_ocr.retired import upgrade_checkpoint
+
+    changed = upgrade_checkpoint(args.path)
+    for file, removed in changed.items():
+        print(f"{file}: removed {', '.join(f'{k}={v}' for k, v in removed.items())}")
+    print(f"{len(changed)} file(s) changed." if changed else "Nothing to remove: the checkpoint is current.")
+    return 0
+
+
 def _push(args: argparse.Namespace) -> int:
     from lerobot_ocr.hub import push_folder
 
@@ -349,6 +359,16 @@ def build_parser() -> argparse.ArgumentParser:
     reb.add_argument("--output-dir", required=True, help="Folder of the new ocr_joint checkpoint.")
     reb.add_argument("--overwrite", action="store_true", help="Replace a checkpoint at --output-dir.")
     reb.set_defaults(func=_rebase)
+
+    upg = sub.add_parser(
+        "upgrade",
+        help="Remove retired ocr_joint options from a checkpoint's config.json / train_config.json, so it "
+        "loads again (options measured and not adopted; see benchmarks/EXPERIMENTS.md).",
+    )
+    upg.add_argument(
+        "path", help="A pretrained_model folder, or a training output folder (all its checkpoints)."
+    )
+    upg.set_defaults(func=_upgrade)
 
     push = sub.add_parser(
         "push", help="Push a finished local LeRobotDataset to the hub (e.g. after a failed push)."

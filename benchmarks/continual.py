@@ -14,8 +14,8 @@ resume like the chain's:
    merged data, and the control on the base's data alone for the same steps (the base was still
    improving with more steps, so this separates new data from more training);
 4. rebase: the joint policy with the augmented base;
-5. the cells (same eval seeds 100000+i as the chain's): the control, the augmented base and the joint
-   policy with the augmented base, from ID and OOD starts.
+5. the cells (same eval seeds 100000+i as the chain's), each model's right after it is made: the
+   augmented base, the control and the joint policy with the augmented base, from ID and OOD starts.
 Writes `benchmarks/results/<task>_continual_<profile>.json` (every cell, the collection line, the paired
 ID check: episodes both / only the base / only the augmented base solved) and the RESULTS.md section
 "Continual learning (<task>, <profile>)". `--set key=value` overrides profile values (chain's and ours).
@@ -192,7 +192,30 @@ def main() -> None:
         return {"frames": info["total_frames"], "base_frames": base_info["total_frames"]}
 
     data = stage("merge", merge)
-    ckpts = {}
+    results = {
+        name: chain.results[name]
+        for name in ("base_id", "base_ood", "joint_ood", "joint_id")
+        if name in chain.results
+    }
+
+    def evaluate_cells(cells: dict[str, tuple[Path, str]]) -> None:
+        for name, (ckpt, region) in cells.items():
+            out = here / f"eval_{name}"
+
+            def evaluate(ckpt=ckpt, region=region, out=out):
+                shutil.rmtree(out, ignore_errors=True)
+                run(eval_args(task, ckpt, region, p, out), logs / f"eval_{name}.log")
+                read = (
+                    json.loads((out / f).read_text()) if (out / f).exists() else None
+                    for f in ("eval_info.json", "ocr_stats.json", "episodes.json")
+                )
+                return summarize(*read)
+
+            results[name] = stage(f"eval_{name}", evaluate)
+
+    # The headline first (the augmented base), so a run cut short still has it; then the control and
+    # the joint policy with the augmented base.
+    ckpts, joint_aug = {}, here / "joint_aug"
     for name, root, repo in (
         ("aug", merged, f"local/{task.name}_aug"),
         ("ctrl", base_data, f"local/{task.name}_base"),
@@ -204,8 +227,7 @@ def main() -> None:
 
         stage(f"ft_{name}", finetune)
         ckpts[name] = out / "checkpoints" / "last" / "pretrained_model"
-
-    joint_aug = here / "joint_aug"
+        evaluate_cells({f"{name}_base_ood": (ckpts[name], "ood"), f"{name}_base_id": (ckpts[name], "id")})
 
     def rebase():
         from lerobot_ocr.continual.rebase import rebase as do_rebase
@@ -213,32 +235,7 @@ def main() -> None:
         do_rebase(chain.ocr_ckpt, ckpts["aug"], joint_aug, overwrite=True)
 
     stage("rebase", rebase)
-    cells = {  # the headline first
-        "aug_base_ood": (ckpts["aug"], "ood"),
-        "aug_base_id": (ckpts["aug"], "id"),
-        "ctrl_base_ood": (ckpts["ctrl"], "ood"),
-        "ctrl_base_id": (ckpts["ctrl"], "id"),
-        "aug_joint_ood": (joint_aug, "ood"),
-        "aug_joint_id": (joint_aug, "id"),
-    }
-    results = {
-        name: chain.results[name]
-        for name in ("base_id", "base_ood", "joint_ood", "joint_id")
-        if name in chain.results
-    }
-    for name, (ckpt, region) in cells.items():
-        out = here / f"eval_{name}"
-
-        def evaluate(ckpt=ckpt, region=region, out=out, name=name):
-            shutil.rmtree(out, ignore_errors=True)
-            run(eval_args(task, ckpt, region, p, out), logs / f"eval_{name}.log")
-            read = (
-                json.loads((out / f).read_text()) if (out / f).exists() else None
-                for f in ("eval_info.json", "ocr_stats.json", "episodes.json")
-            )
-            return summarize(*read)
-
-        results[name] = stage(f"eval_{name}", evaluate)
+    evaluate_cells({"aug_joint_ood": (joint_aug, "ood"), "aug_joint_id": (joint_aug, "id")})
     paired, base_id = None, chain.eval_dirs.get("base_id")
     if base_id is not None and (base_id / "episodes.json").exists():
         paired = paired_outcomes(

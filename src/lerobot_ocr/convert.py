@@ -148,9 +148,8 @@ def source_feature(pose_from: str | Callable, features: dict, repo_id: str) -> s
             f"Unknown --pose-from {pose_from!r}: use 'feature:<name>', 'keypoints:<name>', "
             "'state:<prefix>' or 'estimator:<module>:<fn>'."
         )
-    if kind == "state":
+    if kind == "state":  # its entries: `state_pose_index`
         _feature_info(features, OBS_STATE, repo_id)
-        state_pose_index(name, features, repo_id)
         return OBS_STATE
     _feature_info(features, name, repo_id)
     return name
@@ -253,10 +252,10 @@ def convert_dataset(
     dataset = LeRobotDataset(repo_id, root=root)
     features = dataset.meta.features
     source = source_feature(pose_from, features, repo_id)
-    has_pose = OBS_OBJECT_POSE in features
-    columns = read_columns(dataset.root, [k for k in (source, OBS_OBJECT_POSE if has_pose else None) if k])
     from_state = str(pose_from).startswith("state:")
     pose_index = state_pose_index(str(pose_from)[len("state:") :], features, repo_id) if from_state else None
+    has_pose = OBS_OBJECT_POSE in features
+    columns = read_columns(dataset.root, [k for k in (source, OBS_OBJECT_POSE if has_pose else None) if k])
     poses = compute_object_poses(columns, pose_from, rotation, src_kps, work, dataset, pose_index)
     _check_poses(poses, rotation, columns["episode_index"], columns["frame_index"], str(pose_from))
     keypoints = pose_to_keypoints(pose_to_matrix(poses, rotation), local)  # (N, K, D) world

@@ -34,7 +34,6 @@ from lerobot_ocr.constants import OCR_IN_RECOVERY
 
 KEEP = ("episode", "recovery", "all")
 COLLECT_SEED = 300_000
-DEFAULT_FEATURES = ("timestamp", "frame_index", "episode_index", "index", "task_index")
 RECOVERY_FEATURE = {OCR_IN_RECOVERY: {"dtype": "bool", "shape": (1,), "names": None}}
 
 
@@ -64,6 +63,8 @@ def kept_length(success: np.ndarray, in_recovery: np.ndarray, steps: int, keep: 
 def like_features(meta) -> tuple[dict, bool]:
     """The features to write (those of the LeRobotDatasetMetadata `meta`, less LeRobot's bookkeeping
     columns) and whether they hold videos."""
+    from lerobot.utils.constants import DEFAULT_FEATURES
+
     features = {}
     for key, ft in meta.features.items():
         if key in DEFAULT_FEATURES:
@@ -81,6 +82,8 @@ def episode_arrays(data: dict, row: int, n: int, in_recovery: np.ndarray, featur
     Raises:
         ValueError: a feature the rollout does not give, or gives with another shape (with the fix).
     """
+    import torch
+
     obs = data["observation"]
     out = {}
     for key, ft in features.items():
@@ -93,7 +96,7 @@ def episode_arrays(data: dict, row: int, n: int, in_recovery: np.ndarray, featur
         elif key in obs:
             values = obs[key][row, :n]
             if ft["dtype"] in ("image", "video"):
-                values = (values.permute(0, 2, 3, 1) * 255).round().clamp(0, 255).to(dtype=torch_uint8())
+                values = (values.permute(0, 2, 3, 1) * 255).round().clamp(0, 255).to(torch.uint8)
             values = values.numpy()
         else:
             raise ValueError(
@@ -109,12 +112,6 @@ def episode_arrays(data: dict, row: int, n: int, in_recovery: np.ndarray, featur
         out[key] = values.astype(np.dtype(ft["dtype"])) if ft["dtype"] not in ("image", "video") else values
     out[OCR_IN_RECOVERY] = np.asarray(in_recovery[:n], bool)[:, None]
     return out
-
-
-def torch_uint8():
-    import torch
-
-    return torch.uint8
 
 
 def _frames(task: str, names: list[str]):
@@ -161,7 +158,7 @@ def _rollout_batch(ctx: dict, seeds: list[int], keep: str, features: dict) -> li
     from lerobot.scripts import lerobot_eval
     from lerobot.utils.random_utils import set_seed
 
-    from lerobot_ocr.eval_report import episode_steps
+    from lerobot_ocr.eval_report import episode_modes, episode_steps, success_steps
     from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
 
     policy, n = ctx["policy"], len(seeds)
@@ -184,6 +181,9 @@ def _rollout_batch(ctx: dict, seeds: list[int], keep: str, features: dict) -> li
         modes = np.asarray(policy.ocr_stats()["in_recovery"], bool).T  # (B, T)
     else:
         modes = np.zeros_like(success, dtype=bool)
+    # within each row's own episode (LeRobot steps finished envs until the batch ends)
+    success_at = success_steps(np.stack([s * (np.arange(len(s)) < n) for s, n in zip(success, steps)]))
+    first_base = episode_modes(modes.T, steps)["first_base_step"]
     rows = []
     for b, n_steps in enumerate(steps[:n]):
         kept = kept_length(success[b], modes[b], n_steps, keep)
@@ -191,10 +191,8 @@ def _rollout_batch(ctx: dict, seeds: list[int], keep: str, features: dict) -> li
             rows.append(None)
             continue
         arrays = episode_arrays(data, b, kept, modes[b], features)
-        done = success[b, :n_steps]
-        arrays["_success_step"] = np.array(int(done.argmax()) + 1 if done.any() else -1)
-        back = modes[b, :n_steps]
-        arrays["_first_handback_step"] = np.array(int(back.argmin()) if back[0] and not back.all() else -1)
+        arrays["_success_step"] = np.array(success_at[b])
+        arrays["_first_handback_step"] = np.array(first_base[b])
         rows.append(arrays)
     return rows
 

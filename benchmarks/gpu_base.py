@@ -1,0 +1,431 @@
+"""The `gpu` row: the Push-T low-dim base trained with Diffusion Policy's own low-dim recipe on a GPU for a
+few minutes, then evaluated here on CPU beside the `cpu` row (same data, seeds and protocol).
+
+    .venv/bin/python benchmarks/gpu_base.py pack                       # here: items + packages -> .gpu/
+    python3 benchmarks/gpu_base.py train --seconds 420 --out "$OUT"    # on the GPU machine (bare torch)
+    .venv/bin/python benchmarks/gpu_base.py evaluate --weights <dir>   # here: checkpoint, 4 cells, JSON
+
+The recipe (Chi et al. 2023, low-dim Push-T) with a U-Net half as wide, (128, 256, 512), whose fp16
+weights fit what the GPU machine sends back (its (256, 512, 1024) does not); batch 256, AdamW 1e-4 (betas
+0.95, 0.999, weight decay 1e-6), cosine schedule with 500 warm-up steps, EMA weights (power 0.75, at most
+0.9999) through torch's `AveragedModel`; the model, its loss and the noise scheduler are LeRobot's
+`DiffusionPolicy`, so the checkpoint is a plain LeRobot one. The step count is what fits in `--seconds`
+(measured on the machine first), and the cosine schedule spans exactly those steps.
+
+`pack` computes every training item once with LeRobot's dataset, sampler rule (`drop_n_last_frames`) and
+preprocessor (normalisation), so the GPU machine needs only torch and LeRobot's pure-Python packages,
+which `pack` copies into `.gpu/site` (the GPU image has torch, numpy, huggingface_hub; no LeRobot).
+`evaluate` wraps the new base with the inverse policy of a finished `cpu`-profile chain (`lerobot-ocr
+rebase`) and runs the four cells of `benchmarks/pusht_ocr.py` (resumable), writing
+`benchmarks/results/pusht_gpu.json` and RESULTS.md's "Push-T (gpu)" section.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import os
+import platform
+import shutil
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+PACK = REPO / ".gpu"
+# LeRobot's import chain on the GPU image lacks these (the image has torch, numpy, huggingface_hub, …).
+PACKAGES = (
+    "lerobot",
+    "datasets",
+    "diffusers",
+    "draccus",
+    "gymnasium",
+    "farama_notifications",
+    "mergedeep",
+    "dill",
+    "multiprocess",
+    "_multiprocess",
+    "pytz",
+    "toml",
+)
+# Diffusion Policy's U-Net is (256, 512, 1024): 63.5 M parameters, 121 MiB even in fp16, more than the GPU
+# machine can send back (64 MiB). (128, 256, 512) is 16.6 M, 32 MiB in fp16, sent as 15 MiB shards.
+SHARD_BYTES = 15 * 2**20
+RECIPE = {
+    "down_dims": (128, 256, 512),
+    "batch": 256,
+    "lr": 1e-4,
+    "betas": (0.95, 0.999),
+    "weight_decay": 1e-6,
+    "warmup": 500,
+    "ema_power": 0.75,
+    "ema_max": 0.9999,
+    "seed": 1000,
+}
+
+
+def base_config(meta):
+    """The base's DiffusionConfig: the `cpu` row's settings with the recipe's U-Net, features from `meta`."""
+    from lerobot.configs.types import FeatureType, NormalizationMode
+    from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
+    from lerobot.utils.feature_utils import dataset_to_policy_features
+
+    minmax = NormalizationMode.MIN_MAX
+    cfg = DiffusionConfig(
+        device="cpu",
+        push_to_hub=False,
+        down_dims=RECIPE["down_dims"],
+        horizon=16,
+        n_action_steps=8,
+        n_obs_steps=2,
+        noise_scheduler_type="DDIM",
+        num_inference_steps=10,
+        normalization_mapping={
+            "VISUAL": NormalizationMode.MEAN_STD,
+            "STATE": minmax,
+            "ENV": minmax,
+            "ACTION": minmax,
+        },
+    )
+    features = dataset_to_policy_features(meta.features)
+    cfg.output_features = {k: f for k, f in features.items() if f.type is FeatureType.ACTION}
+    cfg.input_features = {k: f for k, f in features.items() if k not in cfg.output_features}
+    return cfg
+
+
+def pack(workdir: Path, out: Path = PACK) -> None:
+    """Write `out/items.pt` (every normalised training item), `out/config/config.json` and `out/site`."""
+    import torch
+    from lerobot.datasets import EpisodeAwareSampler, LeRobotDataset
+    from lerobot.datasets.factory import resolve_delta_timestamps
+    from lerobot.policies.factory import make_pre_post_processors
+    from tqdm import tqdm
+
+    data = workdir / "base_data"
+    repo_id = "local/pusht_base"
+    meta = LeRobotDataset(repo_id, root=data).meta
+    cfg = base_config(meta)
+    ds = LeRobotDataset(repo_id, root=data, delta_timestamps=resolve_delta_timestamps(cfg, meta))
+    sampler = EpisodeAwareSampler(
+        ds.meta.episodes["dataset_from_index"],
+        ds.meta.episodes["dataset_to_index"],
+        drop_n_last_frames=cfg.drop_n_last_frames,
+    )
+    indices = sorted(iter(sampler))
+    items = [ds[i] for i in tqdm(indices, desc="items", mininterval=5)]
+    keys = [
+        k
+        for k, v in items[0].items()
+        if isinstance(v, torch.Tensor) and (k.startswith("observation.") or k.startswith("action"))
+    ]
+    batch = {k: torch.stack([it[k] for it in items]) for k in keys}
+    preprocessor, _ = make_pre_post_processors(cfg, dataset_stats=ds.meta.stats)
+    batch = preprocessor(batch)
+    batch = {k: v.cpu() for k, v in batch.items() if isinstance(v, torch.Tensor)}
+    shutil.rmtree(out, ignore_errors=True)
+    (out / "config").mkdir(parents=True)
+    torch.save(batch, out / "items.pt")
+    cfg.save_pretrained(out / "config")
+    (out / "source.json").write_text(json.dumps({"workdir": str(workdir), "items": len(indices)}))
+    site = Path(next(p for p in sys.path if p.endswith("site-packages")))
+    for name in PACKAGES:
+        for src in [site / name, *site.glob(f"{name}-*.dist-info")]:
+            if src.is_dir():
+                shutil.copytree(src, out / "site" / src.name, ignore=shutil.ignore_patterns("__pycache__"))
+    for src in site.glob("av-*.dist-info"):  # its metadata only: LeRobot checks av's version at import
+        shutil.copytree(src, out / "site" / src.name)
+    for py in ("mergedeep.py",):
+        if (site / py).is_file():
+            shutil.copy(site / py, out / "site" / py)
+    size = sum(f.stat().st_size for f in out.rglob("*") if f.is_file())
+    print(f"packed {len(indices)} items, keys {sorted(batch)}, {size / 2**20:.1f} MiB in {out}")
+
+
+def _import_lerobot(site: Path) -> None:
+    """Make LeRobot importable on the GPU image: our copies after its own packages; PyAV stubbed (only
+    video decoding needs it, and this script decodes no video)."""
+    import importlib.machinery
+
+    sys.path.append(str(site))
+    try:
+        import av  # noqa: F401
+    except ImportError:
+
+        class _Stub(type):  # any attribute is another stub class (so `av.codec.Codec | None` works)
+            def __getattr__(cls, name):
+                if name.startswith("__"):
+                    raise AttributeError(name)
+                return _Stub(f"{cls.__name__}.{name}", (), {})
+
+        for name in ("av", "av.logging", "av.video", "av.audio", "av.container", "av.codec", "av.error"):
+            sys.modules[name] = _Stub(name, (), {"__spec__": importlib.machinery.ModuleSpec(name, None)})
+
+
+def train(pack_dir: Path, seconds: float, out: Path) -> None:
+    """Train the base for about `seconds` on the GPU; write to `out` its config.json, its EMA weights as
+    fp16 shards `ema_fp16_<i>.safetensors` (refreshed every minute, so a cut run still returns them) and
+    train_log.json."""
+    t0 = time.time()
+    _import_lerobot(pack_dir / "site")
+    import torch
+    from diffusers.optimization import get_cosine_schedule_with_warmup
+    from lerobot.configs.policies import PreTrainedConfig
+    from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
+    from torch.optim.swa_utils import AveragedModel
+
+    torch.backends.cuda.matmul.allow_tf32 = True
+    torch.backends.cudnn.allow_tf32 = True
+    device = "cuda" if torch.cuda.is_available() else "cpu"  # cpu: a smoke test of this script only
+    sync = torch.cuda.synchronize if device == "cuda" else (lambda: None)
+    cfg = PreTrainedConfig.from_pretrained(pack_dir / "config")
+    cfg.device = device
+    data = {k: v.to(device) for k, v in torch.load(pack_dir / "items.pt").items()}
+    n = len(next(iter(data.values())))
+    batch_size = RECIPE["batch"]
+
+    def ema_update(averaged, current, num_averaged):  # Diffusion Policy's EMA warm-up (power 0.75)
+        step = int(num_averaged)
+        decay = min(RECIPE["ema_max"], max(0.0, 1 - (1 + step) ** -RECIPE["ema_power"]))
+        torch._foreach_lerp_(averaged, current, 1 - decay)
+
+    def build():
+        torch.manual_seed(RECIPE["seed"])
+        policy = DiffusionPolicy(cfg).to(device).train()
+        optimizer = torch.optim.AdamW(
+            policy.parameters(),
+            lr=RECIPE["lr"],
+            betas=RECIPE["betas"],
+            eps=1e-8,
+            weight_decay=RECIPE["weight_decay"],
+        )
+        return policy, optimizer
+
+    def step_fn(policy, optimizer, idx):
+        loss, _ = policy.forward({k: v[idx] for k, v in data.items()})
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(policy.parameters(), 10.0)  # lerobot-train's diffusion preset
+        optimizer.step()
+        return loss
+
+    warm, probe = (30, 100) if device == "cuda" else (1, 2)
+    # 1. measure this machine's step rate (a throw-away model), 2. train for the time that is left
+    policy, optimizer = build()
+    ema = AveragedModel(policy, multi_avg_fn=ema_update, use_buffers=True)
+    for i in range(warm + probe):
+        if i == warm:
+            sync()
+            t_probe = time.time()
+        step_fn(policy, optimizer, torch.randint(0, n, (batch_size,), device=device))
+        ema.update_parameters(policy)
+    sync()
+    rate = probe / (time.time() - t_probe)
+    steps = max(1, int(rate * (seconds - (time.time() - t0) - 20)))
+    print(f"{rate:.1f} steps/s -> {steps} steps", flush=True)
+
+    policy, optimizer = build()
+    scheduler = get_cosine_schedule_with_warmup(optimizer, RECIPE["warmup"], steps)
+    ema = AveragedModel(policy, multi_avg_fn=ema_update, use_buffers=True)
+    log, losses, last_save, t_train = [], [], time.time(), time.time()
+    gen = torch.Generator(device=device).manual_seed(RECIPE["seed"])
+    perm, pos = torch.randperm(n, device=device, generator=gen), 0
+
+    def save(step):  # EMA weights in fp16 shards of at most SHARD_BYTES (the device tool's file limit)
+        from safetensors.torch import save_file
+
+        state = {
+            k: v.detach().to(torch.float16 if v.is_floating_point() else v.dtype).cpu()
+            for k, v in ema.module.state_dict().items()
+        }
+        shards, size = [{}], 0
+        for k, v in state.items():
+            if size + v.nbytes > SHARD_BYTES and shards[-1]:
+                shards, size = [*shards, {}], 0
+            shards[-1][k], size = v.contiguous(), size + v.nbytes
+        for old in out.glob("ema_fp16_*.safetensors"):
+            old.unlink()
+        for i, shard in enumerate(shards):
+            save_file(shard, out / f"ema_fp16_{i}.safetensors")
+        cfg.save_pretrained(out)
+        info = {
+            "recipe": RECIPE,
+            "steps_planned": steps,
+            "steps_done": step,
+            "items": n,
+            "train_seconds": time.time() - t_train,
+            "steps_per_second_probe": rate,
+            "gpu": torch.cuda.get_device_name() if device == "cuda" else "cpu",
+            "torch": torch.__version__,
+            "log": log,
+        }
+        (out / "train_log.json").write_text(json.dumps(info, indent=1))
+
+    for step in range(1, steps + 1):
+        if pos + batch_size > n:  # a new epoch: reshuffle (the last partial batch is dropped)
+            perm, pos = torch.randperm(n, device=device, generator=gen), 0
+        losses.append(step_fn(policy, optimizer, perm[pos : pos + batch_size]).detach())
+        pos += batch_size
+        scheduler.step()
+        ema.update_parameters(policy)
+        if step % 1000 == 0 or step == steps:
+            log.append(
+                {
+                    "step": step,
+                    "loss": torch.stack(losses).mean().item(),
+                    "lr": scheduler.get_last_lr()[0],
+                    "seconds": round(time.time() - t_train, 1),
+                }
+            )
+            losses = []
+            print(log[-1], flush=True)
+            if time.time() - last_save > 60:
+                save(step)
+                last_save = time.time()
+    save(steps)
+    print(f"done: {steps} steps in {time.time() - t_train:.0f} s", flush=True)
+
+
+def evaluate(weights: Path, source: Path, work: Path, cells: list[str]) -> None:
+    """Assemble the gpu base checkpoint (+ processors from the dataset's stats) in `work`, wrap it with
+    `source`'s inverse policy, run the cells (resumable) and publish the row."""
+    sys.path[:0] = [str(HERE), str(REPO / "src")]
+    from lerobot.datasets import LeRobotDatasetMetadata
+    from lerobot.policies.factory import make_pre_post_processors
+    from results_md import update_section
+    from summary import write as write_summary
+
+    from lerobot_ocr.eval_report import format_table, summarize
+    from lerobot_ocr.pipeline import BIN, EVAL_SEED, PUSHT, Stages, eval_args, run
+
+    p = dict(PUSHT.profiles["cpu"])
+    stage = Stages(work)
+    base = work / "base" / "checkpoints" / "last" / "pretrained_model"
+    joint = work / "ocr" / "checkpoints" / "last" / "pretrained_model"
+    source_joint = source / "ocr" / "checkpoints" / "last" / "pretrained_model"
+    train_log = json.loads((weights / "train_log.json").read_text())
+
+    def assemble():
+        from lerobot.configs.policies import PreTrainedConfig
+        from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
+        from safetensors.torch import load_file
+
+        cfg = PreTrainedConfig.from_pretrained(weights)
+        cfg.device = "cpu"
+        policy = DiffusionPolicy(cfg)
+        state = {}
+        for shard in sorted(weights.glob("ema_fp16_*.safetensors")):
+            state.update(load_file(shard))
+        policy.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
+        shutil.rmtree(base, ignore_errors=True)
+        policy.save_pretrained(base)
+        meta = LeRobotDatasetMetadata("local/pusht_base", root=source / "base_data")
+        for processor in make_pre_post_processors(cfg, dataset_stats=meta.stats):
+            processor.save_pretrained(base)
+        (work / "train_log.json").write_text(json.dumps(train_log, indent=1))
+        shutil.rmtree(joint, ignore_errors=True)
+        run(
+            [
+                str(BIN / "lerobot-ocr"),
+                "rebase",
+                f"--policy-path={source_joint}",
+                f"--base-path={base}",
+                f"--output-dir={joint}",
+            ],
+            work / "logs" / "rebase.log",
+        )
+        return {"steps": train_log["steps_done"], "inverse_policy_from": str(source_joint)}
+
+    stage("assemble", assemble)
+    results = {}
+    for name in cells:
+        ckpt, region = (base if name.startswith("base") else joint), name.split("_")[1]
+        out = work / f"eval_{name}"
+
+        def cell(ckpt=ckpt, region=region, out=out, name=name):
+            shutil.rmtree(out, ignore_errors=True)
+            run(eval_args(PUSHT, ckpt, region, p, out), work / "logs" / f"eval_{name}.log")
+            read = lambda f: json.loads((out / f).read_text()) if (out / f).exists() else None  # noqa: E731
+            return summarize(read("eval_info.json"), read("ocr_stats.json"), read("episodes.json"))
+
+        results[name] = stage(f"eval_{name}", cell)
+    table = format_table(results)
+    print("\n" + table)
+    if set(results) != {"base_id", "base_ood", "joint_id", "joint_ood"}:
+        return  # the row is published once all four cells exist
+    source_train = json.loads(
+        (source / "ocr" / "checkpoints" / "last" / "pretrained_model" / "train_config.json").read_text()
+    )
+    payload = {
+        "benchmark": "pusht_ocr",
+        "profile": "gpu",
+        "settings": {
+            **p,
+            "base_dims": str(list(RECIPE["down_dims"])),
+            "base_steps": train_log["steps_done"],
+            "base_batch": RECIPE["batch"],
+            "ocr_steps": source_train["steps"],
+            "ocr_dims": str(source_train["policy"]["down_dims"]),
+        },
+        "recipe": RECIPE,
+        "base_training": {k: train_log[k] for k in ("steps_done", "train_seconds", "gpu", "torch", "items")},
+        **results,
+        "stage_seconds": stage.times,
+        "machine": f"eval: {platform.machine()}, {os.cpu_count()} cores, python {platform.python_version()}",
+        "date": dt.date.today().isoformat(),
+    }
+    (HERE / "results" / "pusht_gpu.json").write_text(json.dumps(payload, indent=2) + "\n")
+    write_summary()
+    minutes = train_log["train_seconds"] / 60
+    update_section(
+        "Push-T (gpu)",
+        f"""
+The `cpu` row's 100 scripted ID demos and low-dim features; base trained with Diffusion Policy's
+low-dim recipe on one {train_log["gpu"]}: U-Net {list(RECIPE["down_dims"])}, batch {RECIPE["batch"]},
+{train_log["steps_done"]} steps in {minutes:.1f} min, AdamW 1e-4, cosine with 500 warm-up steps, EMA
+weights (power 0.75); the inverse policy of the chain in `{source}` ({source_train["steps"]} steps,
+U-Net {source_train["policy"]["down_dims"]}), joined with `lerobot-ocr rebase`. {p["episodes"]} episodes
+per cell, env seeds {EVAL_SEED}+i, evaluated on CPU; {PUSHT.episode_length}-step episodes, success within
+{PUSHT.step_budget} steps (strict) and within {PUSHT.decision_budget} policy decisions.
+
+{table}
+
+Machine: {payload["machine"]}. Date: {payload["date"]}.
+
+Command: `python3 benchmarks/gpu_base.py train --seconds … --out $OUT` on the GPU machine after
+`benchmarks/gpu_base.py pack`, then `.venv/bin/python benchmarks/gpu_base.py evaluate --weights <its output>`.
+""",
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    a = sub.add_parser("pack", help="here: items, config and LeRobot's packages -> .gpu/")
+    a.add_argument("--workdir", type=Path, default=REPO / "outputs" / "pusht_ocr_cpu")
+    b = sub.add_parser("train", help="on the GPU machine")
+    b.add_argument("--seconds", type=float, default=420)
+    b.add_argument("--out", type=Path, default=Path(os.environ.get("OUT", "outputs/gpu_base")))
+    c = sub.add_parser("evaluate", help="here: checkpoint, cells, results")
+    c.add_argument("--weights", type=Path, required=True, help="the train command's output folder")
+    c.add_argument(
+        "--source",
+        type=Path,
+        default=REPO / "outputs" / "pusht_ocr_cpu",
+        help="a finished chain: its base_data and inverse policy",
+    )
+    c.add_argument("--workdir", type=Path, default=REPO / "outputs" / "pusht_ocr_gpu")
+    c.add_argument("--cells", nargs="*", default=["base_id", "joint_ood", "base_ood", "joint_id"])
+    args = parser.parse_args()
+    if args.command == "pack":
+        pack(args.workdir)
+    elif args.command == "train":
+        args.out.mkdir(parents=True, exist_ok=True)
+        train(PACK if (PACK / "items.pt").exists() else Path(".gpu"), args.seconds, args.out)
+    else:
+        evaluate(args.weights, args.source, args.workdir, args.cells)
+
+
+if __name__ == "__main__":
+    main()

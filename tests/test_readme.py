@@ -57,6 +57,15 @@ def test_the_options_table_matches_the_config_and_the_shipped_configs():
         )
 
 
+def test_the_franka_config_is_the_square_column():
+    """The README documents ocr_joint_franka.json as the Square settings (same key layout)."""
+    franka, square = (
+        json.loads((REPO / "configs" / "policy" / f).read_text())
+        for f in ("ocr_joint_franka.json", "ocr_joint_square.json")
+    )
+    assert franka == square
+
+
 def differs(value, default) -> bool:
     return list(value) != list(default) if isinstance(value, list) else value != default
 

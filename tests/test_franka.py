@@ -2,7 +2,6 @@
 backends against fake panda-py / franky modules, pose sources (ArUco on a rendered marker, hold and
 timeout, callables), and registration."""
 
-import logging
 import math
 import sys
 import types
@@ -22,7 +21,7 @@ from lerobot_ocr.robots.franka_ocr.keys import (
     pose_to_values,
     values_to_pose,
 )
-from lerobot_ocr.robots.pose import CallablePoseSourceConfig, SimPoseSourceConfig
+from lerobot_ocr.robots.pose import ArucoPoseSourceConfig, CallablePoseSourceConfig, SimPoseSourceConfig
 from lerobot_ocr.robots.pose.tracker import PoseLostError, PoseTracker
 
 
@@ -61,6 +60,10 @@ def test_config_rejects_bad_values_with_the_flag_to_fix():
         FrankaOcrConfig(workspace_min=[0, 0])
     with pytest.raises(ValueError, match="backend=sim"):
         FrankaOcrConfig(backend="panda_py", pose_source=SimPoseSourceConfig())
+    with pytest.raises(ValueError, match="sim_fps"):
+        FrankaOcrConfig(sim_fps=3)
+    with pytest.raises(ValueError, match="pose_source.camera='wrist'"):
+        FrankaOcrConfig(pose_source=ArucoPoseSourceConfig(camera="wrist"))
 
 
 def test_lerobot_factories_find_our_robot_camera_and_teleop():
@@ -77,24 +80,28 @@ def test_lerobot_factories_find_our_robot_camera_and_teleop():
     assert type(cams["a"]).__name__ == "OcrSimCamera"
 
 
-def test_a_failing_device_registration_keeps_ocr_joint(monkeypatch, caplog):
-    """draccus raises on a duplicate type name; our guard keeps the policy and envs registered."""
-    from lerobot.configs.policies import PreTrainedConfig
-    from lerobot.robots.config import RobotConfig
+def test_a_name_clash_keeps_ocr_joint_and_the_envs():
+    """draccus raises on a duplicate type name; if another plugin took `franka_ocr`, our guard keeps the
+    policy and envs registered and says why the robot is missing."""
+    import subprocess
 
-    import lerobot_ocr
-
-    with pytest.raises(ValueError):  # what a name clash does without the guard
-
-        @RobotConfig.register_subclass("franka_ocr")
-        class Clash(FrankaOcrConfig):
-            pass
-
-    monkeypatch.setitem(sys.modules, "lerobot_ocr.robots", None)  # `from lerobot_ocr import robots` fails
-    monkeypatch.delattr(lerobot_ocr, "robots", raising=False)
-    with caplog.at_level(logging.WARNING):
-        lerobot_ocr._register_devices()
-    assert "not available" in caplog.text and "ocr_joint" in PreTrainedConfig.get_known_choices()
+    code = (
+        "import logging, sys; logging.basicConfig(level=logging.WARNING)\n"
+        "from dataclasses import dataclass\n"
+        "from lerobot.robots.config import RobotConfig\n"
+        "@RobotConfig.register_subclass('franka_ocr')\n"
+        "@dataclass(kw_only=True)\n"
+        "class OtherFranka(RobotConfig): pass\n"
+        "import lerobot_ocr\n"
+        "from lerobot.configs.policies import PreTrainedConfig\n"
+        "from lerobot.envs.configs import EnvConfig\n"
+        "ok = 'ocr_joint' in PreTrainedConfig.get_known_choices()\n"
+        "ok = ok and 'pusht_ocr' in EnvConfig.get_known_choices()\n"
+        "sys.exit(0 if ok else 1)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "franka_ocr robot" in done.stderr and "not available" in done.stderr
 
 
 def test_import_stays_light():
@@ -210,8 +217,9 @@ def test_send_action_partial_and_unknown_keys_clamps_and_latches(robot):
     assert backend.commands[-1][1] is True  # closed: sent once
     r.send_action({GRIPPER_KEY: 0.2})
     assert backend.commands[-1][1] is None  # still closed, nothing sent to the gripper
-    r.send_action({"ee_z.pos": -5.0})  # below the workspace
-    assert backend.commands[-1][0][2, 3] >= 0.0
+    r.config.max_step_m = 10.0
+    r.send_action({"ee_z.pos": -5.0})  # below the workspace: clipped to its floor
+    assert backend.commands[-1][0][2, 3] == pytest.approx(FakeBackend.default_workspace[0][2])
 
 
 def test_a_backend_failure_stops_the_robot_and_says_why(robot):
@@ -258,6 +266,7 @@ def fake_panda_py(refuse=False):
         rec["panda"].get_pose = lambda: pose(rot_z(0.3), (0.4, 0.1, 0.2))
         return rec["panda"]
 
+    rec["gripper"].read_once = lambda: types.SimpleNamespace(width=0.079)
     libfranka.Gripper = lambda host: rec["gripper"]
 
     def CartesianImpedance(**kwargs):
@@ -279,8 +288,11 @@ def test_panda_py_backend_calls_units_and_quaternion_order(monkeypatch):
     backend.connect()
     assert rec["panda"].init == ("10.0.0.2", "ignore")
     assert np.allclose(np.diag(rec["controller"].kwargs["impedance"]), [600] * 3 + [40] * 3)
+    assert [c[0] for c in rec["gripper"].calls] == ["move"]  # opened at connect (matches the latch)
     backend.command(pose(rot_z(math.pi / 2), (0.5, 0.0, 0.3)), grip=True)
-    backend.disconnect()  # waits for the gripper thread
+    backend._worker.submit(lambda: None).result()  # the gripper thread is done
+    assert backend.gripper_width() == 0.079
+    backend.disconnect()
     name, (position, quat), _ = rec["controller"].calls[-1]
     assert name == "set_control"
     np.testing.assert_allclose(position, [0.5, 0.0, 0.3])
@@ -303,6 +315,37 @@ def test_panda_py_connect_refused_says_enable_fci(monkeypatch):
     assert not backend.is_connected
 
 
+def test_panda_py_reflex_and_gripper_fault_surface(monkeypatch):
+    """panda-py's control thread only logs a libfranka error until raise_error(); a gripper call fails in
+    its worker thread: both must reach the caller (FrankaOcr.send_action then stops the robot)."""
+    from lerobot_ocr.robots.franka_ocr.backends.panda_py import PandaPyBackend
+
+    modules, rec = fake_panda_py()
+    for name, mod in modules.items():
+        monkeypatch.setitem(sys.modules, name, mod)
+    backend = PandaPyBackend(FrankaOcrConfig(backend="panda_py"))
+    backend.connect()
+
+    def grasp(*args):
+        raise RuntimeError("libfranka gripper: command failed")
+
+    rec["gripper"].grasp = grasp
+    backend.command(pose(), grip=True)
+    backend._worker.submit(lambda: None).result()
+    with pytest.raises(RuntimeError, match="gripper failed.*command failed"):
+        backend.command(pose(), grip=None)
+
+    def raise_error():
+        raise RuntimeError("libfranka: Move command aborted: motion aborted by reflex! ['cartesian_reflex']")
+
+    rec["panda"].raise_error = raise_error
+    with pytest.raises(RuntimeError, match="cartesian_reflex"):
+        backend.command(pose(), grip=None)
+    with pytest.raises(RuntimeError, match="cartesian_reflex"):
+        backend.ee_pose()
+    backend.disconnect()
+
+
 def test_missing_robot_library_says_what_to_install(monkeypatch):
     from lerobot_ocr.robots.franka_ocr.backends.franky import FrankyBackend
 
@@ -318,6 +361,7 @@ def test_franky_backend_calls_units_and_quaternion_order(monkeypatch):
     franky = types.ModuleType("franky")
     franky.RealtimeConfig = types.SimpleNamespace(Enforce="enforce", Ignore="ignore")
     franky.Robot = lambda host, realtime_config=None: robot
+    gripper.width = 0.081
     franky.Gripper = lambda host: gripper
     franky.JointMotion = lambda q: ("joint", tuple(q))
     franky.Affine = lambda t, q: ("affine", tuple(t), tuple(q))
@@ -335,13 +379,17 @@ def test_franky_backend_calls_units_and_quaternion_order(monkeypatch):
     backend = FrankyBackend(FrankaOcrConfig(backend="franky"))
     backend.connect()
     np.testing.assert_allclose(backend.ee_pose(), pose(rot_z(math.pi / 2), (0.4, 0.0, 0.3)), atol=1e-9)
-    backend.command(pose(rot_z(math.pi / 2), (0.5, 0.0, 0.3)), grip=False)
+    backend.command(pose(rot_z(math.pi / 2), (0.5, 0.0, 0.3)), grip=True)
+    backend._worker.submit(lambda: None).result()
+    backend.disconnect()
     move = [c for c in robot.calls if c[0] == "move"][-1]
     _, affine, ref = move[1][0]
     assert ref == "absolute" and move[2] == {"asynchronous": True}
     np.testing.assert_allclose(affine[1], [0.5, 0, 0.3])
     np.testing.assert_allclose(affine[2], [0, 0, half, half], atol=1e-9)  # x, y, z, w
-    assert [c[0] for c in gripper.calls] == ["move_async"] and gripper.calls[0][1] == (0.08, 0.1)
+    assert [c[0] for c in gripper.calls] == ["move", "grasp"]  # opened at connect, then the grasp
+    assert gripper.calls[0][1] == (0.08, 0.1) and gripper.calls[1][1][:3] == (0.04, 0.1, 28.0)
+    assert backend.gripper_width() == 0.081
 
 
 # -- pose sources ------------------------------------------------------------------------------------
@@ -391,15 +439,17 @@ def test_aruco_pose_within_5_mm_and_2_degrees(tilt):
 
 def test_pose_tracker_holds_then_stops():
     seq = iter([None, pose(), None, None, np.full((4, 4), np.nan), pose(t=(1, 2, 3)), None])
-    tracker = PoseTracker(types.SimpleNamespace(estimate=lambda images, state: next(seq)), max_age=2)
+    now = iter([0.0, 1.0, 1.5, 2.0, 2.5, 3.0, 3.4])
+    source = types.SimpleNamespace(estimate=lambda images, state: next(seq))
+    tracker = PoseTracker(source, max_age_s=1.0, clock=lambda: next(now))
     with pytest.raises(PoseLostError, match="not seen the object yet"):
         tracker({}, {})
     first = tracker({}, {})
-    assert tracker({}, {}) is first and tracker({}, {}) is first and tracker.age == 2  # held twice
-    with pytest.raises(PoseLostError, match="missing for 3 frames"):
+    assert tracker({}, {}) is first and tracker({}, {}) is first and tracker.age == 1.0  # held for 1 s
+    with pytest.raises(PoseLostError, match="missing for 1.5 s"):
         tracker({}, {})  # NaN counts as missing
     assert tracker({}, {})[0, 3] == 1 and tracker.age == 0
-    assert tracker({}, {})[0, 3] == 1 and tracker.age == 1
+    assert tracker({}, {})[0, 3] == 1 and tracker.age == pytest.approx(0.4)
 
 
 def test_callable_pose_source_loads_module_function(tmp_path, monkeypatch):

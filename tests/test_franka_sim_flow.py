@@ -22,6 +22,7 @@ def robot_config(robot_id="flow"):
     return FrankaOcrConfig(
         id=robot_id,
         backend="sim",
+        sim_fps=10,
         pose_source=SimPoseSourceConfig(),
         cameras={"agentview": OcrSimCameraConfig(width=32, height=32, fps=10)},
     )
@@ -183,6 +184,7 @@ def test_record_convert_train_select_action_rollout(tmp_path, monkeypatch):
             "lerobot-rollout",
             "--robot.type=franka_ocr",
             "--robot.backend=sim",
+            "--robot.sim_fps=10",
             "--robot.id=rollout",
             "--robot.pose_source.type=sim",
             "--robot.cameras={agentview: {type: ocr_sim, width: 32, height: 32, fps: 10}}",

@@ -30,7 +30,8 @@ class FrankaOcrConfig(RobotConfig):
     None = the backend's default box). Gripper (m, N): open width, grasp width/force/epsilon, speed (m/s).
     cameras: LeRobot camera configs (`ocr_sim` renders the sim scene). pose_source: where the object pose
     comes from (`none`, `sim`, `aruco`, `callable`). sim_region / sim_seed: the sim's nut starts ("id",
-    "ood", "all") and the first scene's seed (the next scenes take the following seeds).
+    "ood", "all") and the first scene's seed (the next scenes take the following seeds); sim_fps: frames
+    per second of sim time (a divisor of the controller's 20 Hz; match --dataset.fps / --fps).
     """
 
     backend: str = "sim"
@@ -52,6 +53,7 @@ class FrankaOcrConfig(RobotConfig):
     pose_source: PoseSourceConfig = field(default_factory=NonePoseSourceConfig)
     sim_region: str = "id"
     sim_seed: int = 0
+    sim_fps: int = 20
 
     def __post_init__(self):
         super().__post_init__()
@@ -65,6 +67,17 @@ class FrankaOcrConfig(RobotConfig):
             raise ValueError(f"--robot.home_joints needs the Panda's 7 joint angles, got {self.home_joints}.")
         if self.max_step_m <= 0 or self.max_step_rad <= 0:
             raise ValueError("--robot.max_step_m and --robot.max_step_rad must be positive.")
+        if self.sim_fps <= 0 or 20 % self.sim_fps:
+            raise ValueError(
+                "--robot.sim_fps must divide the sim's 20 Hz control (1, 2, 4, 5, 10, 20), "
+                f"got {self.sim_fps}."
+            )
+        camera = getattr(self.pose_source, "camera", None)
+        if camera and camera not in self.cameras:
+            raise ValueError(
+                f"--robot.pose_source.camera={camera!r} is not one of --robot.cameras "
+                f"({sorted(self.cameras)})."
+            )
         if self.pose_source.type == "sim" and self.backend != "sim":
             raise ValueError(
                 "--robot.pose_source.type=sim reads the simulator: use it with --robot.backend=sim."

@@ -79,19 +79,26 @@ class FrankaOcr(Robot):
     def connect(self, calibrate: bool = True) -> None:
         if self.is_connected:
             raise RuntimeError(f"{self} is already connected.")
+        source = make_pose_source(self.config.pose_source)  # config errors before the arm moves
         backend = make_backend(self.config)
-        backend.connect()
+        try:
+            backend.connect()
+        except Exception:
+            try:
+                backend.disconnect()  # whatever part of it started (a controller, a sim)
+            finally:
+                raise
         self.backend = backend
         try:
             for camera in self.cameras.values():
                 if hasattr(camera, "attach"):  # sim cameras render this robot's scene
                     camera.attach(backend)
                 camera.connect()
-            source = make_pose_source(self.config.pose_source)
             if source is not None:
                 if hasattr(source, "connect"):
                     source.connect(self)
-                self.pose_tracker = PoseTracker(source, self.config.pose_source.max_pose_age)
+                self.pose_tracker = PoseTracker(source, self.config.pose_source.max_pose_age_s)
+                self.pose_tracker.reset()
         except Exception:
             self.disconnect()
             raise
@@ -123,6 +130,8 @@ class FrankaOcr(Robot):
     def get_observation(self) -> dict:
         if not self.is_connected:
             raise RuntimeError(f"{self} is not connected: call connect() first.")
+        if getattr(self.backend, "reset_requested", False):  # the sim expert finished: the next scene
+            self.reset_scene()
         obs = dict(zip(EE_KEYS, map(float, pose_to_values(self.backend.ee_pose())), strict=True))
         obs[GRIPPER_WIDTH_KEY] = self.backend.gripper_width()
         frames = {name: camera.async_read() for name, camera in self.cameras.items()}
@@ -169,13 +178,18 @@ class FrankaOcr(Robot):
         return seed
 
     def disconnect(self) -> None:
-        for camera in self.cameras.values():
-            if camera.is_connected:
-                camera.disconnect()
+        """Stop the arm first (whatever else fails), then the cameras and the pose source."""
+        backend, self.backend = self.backend, None
         source = self.pose_tracker.source if self.pose_tracker is not None else None
-        if source is not None and hasattr(source, "disconnect"):
-            source.disconnect()
         self.pose_tracker = None
-        if self.backend is not None:
-            self.backend.disconnect()
-        self.backend = None
+        try:
+            if backend is not None:
+                backend.disconnect()
+        finally:
+            try:
+                for camera in self.cameras.values():
+                    if camera.is_connected:
+                        camera.disconnect()
+            finally:
+                if source is not None and hasattr(source, "disconnect"):
+                    source.disconnect()

@@ -15,10 +15,11 @@ import draccus
 
 @dataclass
 class PoseSourceConfig(draccus.ChoiceRegistry, abc.ABC):
-    """max_pose_age: consecutive frames without a detection during which the last pose is held; one more
-    and the episode stops with an error (a stale or NaN pose never reaches a dataset)."""
+    """max_pose_age_s: seconds without a detection during which the last pose is held; after that the next
+    observation raises, which ends the recording or rollout (episodes saved before are kept): a stale or
+    NaN pose never reaches a dataset."""
 
-    max_pose_age: int = 10
+    max_pose_age_s: float = 1.0
 
     @property
     def type(self) -> str:

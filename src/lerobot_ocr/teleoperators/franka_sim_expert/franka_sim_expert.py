@@ -58,8 +58,8 @@ class FrankaSimExpert(Teleoperator):
         if backend.task_success():
             self._done_for += 1
             if 0 <= self.config.reset_after_success < self._done_for:
-                backend.reset_scene()
-                self._done_for = 0
+                backend.reset_requested = True  # the robot resets before its next observation, so no
+                self._done_for = 0  # frame pairs one scene's observation with another's action
         else:
             self._done_for = 0
         return backend.expert_action()

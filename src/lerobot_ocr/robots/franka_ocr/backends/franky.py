@@ -5,6 +5,8 @@ Frame: the robot base (m); franky's quaternions are scalar-last (x, y, z, w)."""
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 import torch
 
@@ -18,7 +20,9 @@ class FrankyBackend:
     def __init__(self, config):
         self.config = config
         self.robot = self.gripper = self._franky = None
-        self._grip_future = None
+        self._worker: ThreadPoolExecutor | None = None
+        self._grip_errors: list[BaseException] = []
+        self._width = 0.0
 
     @property
     def is_connected(self) -> bool:
@@ -37,6 +41,8 @@ class FrankyBackend:
         self.robot.relative_dynamics_factor = 0.1
         self.robot.recover_from_errors()
         self.robot.move(franky.JointMotion(list(cfg.home_joints)))
+        self._grip(False)  # open, so the gripper matches the robot's open latch
+        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="franka_gripper")
 
     def ee_pose(self) -> np.ndarray:
         pose = self.robot.current_cartesian_state.pose.end_effector_pose
@@ -47,27 +53,43 @@ class FrankyBackend:
         return out
 
     def gripper_width(self) -> float:
-        return float(self.gripper.width)
+        return self._width  # read after each grasp / move: a live read takes about 0.1 s
+
+    def _grip(self, close: bool) -> None:
+        cfg = self.config
+        if close:
+            self.gripper.grasp(
+                cfg.grasp_width, cfg.gripper_speed, cfg.grasp_force, cfg.grasp_epsilon, cfg.grasp_epsilon
+            )
+        else:
+            self.gripper.move(cfg.gripper_open_width, cfg.gripper_speed)
+        self._width = float(self.gripper.width)
+
+    def _grip_logged(self, close: bool) -> None:
+        try:
+            self._grip(close)
+        except Exception as e:  # noqa: BLE001  (raised on the next command)
+            self._grip_errors.append(e)
 
     def command(self, target: np.ndarray, grip: bool | None) -> None:
+        if self._grip_errors:
+            raise RuntimeError(f"the gripper failed: {self._grip_errors.pop(0)}")
         f = self._franky
         quat_xyzw = matrix_to_quaternion(torch.as_tensor(target[:3, :3]), convention="xyzw").numpy()
         motion = f.CartesianMotion(f.Affine(np.asarray(target[:3, 3]), quat_xyzw), f.ReferenceType.Absolute)
         self.robot.move(motion, asynchronous=True)
-        if grip is not None:
-            cfg = self.config
-            if grip:
-                self._grip_future = self.gripper.grasp_async(
-                    cfg.grasp_width, cfg.gripper_speed, cfg.grasp_force, cfg.grasp_epsilon, cfg.grasp_epsilon
-                )
-            else:
-                self._grip_future = self.gripper.move_async(cfg.gripper_open_width, cfg.gripper_speed)
+        if grip is not None:  # grasp / move block for about a second: off the control thread
+            self._worker.submit(self._grip_logged, grip)
 
     def stop(self) -> None:
         if self.robot is not None:
             self.robot.stop()
 
     def disconnect(self) -> None:
-        if self.robot is not None:
-            self.robot.stop()
-        self.robot = self.gripper = None
+        try:
+            if self.robot is not None:
+                self.robot.stop()
+        finally:
+            if self._worker is not None:
+                self._worker.shutdown(wait=True, cancel_futures=True)
+            self.robot = self.gripper = self._worker = None

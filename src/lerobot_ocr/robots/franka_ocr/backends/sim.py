@@ -1,5 +1,6 @@
 """`--robot.backend=sim`: robosuite's Panda in the Square scene (`square_ocr`), under its absolute world-frame
-OSC controller. One `command` = one env step (20 Hz control). Frame: robosuite's world (m)."""
+OSC controller (20 Hz). One `command` = 20 / sim_fps controller steps, so one frame is 1 / sim_fps seconds
+of sim time: set `--robot.sim_fps` to the dataset's fps. Frame: robosuite's world (m)."""
 
 from __future__ import annotations
 
@@ -40,6 +41,8 @@ class SimBackend:
         self._grip = -1.0
         self._episode = 0
         self._expert = None
+        self.reset_requested = False  # set by the sim expert teleop; the robot resets before its next read
+        self.substeps = 20 // config.sim_fps  # robosuite runs its controller at 20 Hz
 
     @property
     def is_connected(self) -> bool:
@@ -62,7 +65,7 @@ class SimBackend:
         seed = self.config.sim_seed + self._episode if seed is None else seed
         self.env.reset(seed=seed)
         self._episode += 1
-        self._grip, self._expert, self.seed = -1.0, None, seed
+        self._grip, self._expert, self.seed, self.reset_requested = -1.0, None, seed, False
         return seed
 
     def ee_pose(self) -> np.ndarray:
@@ -81,7 +84,9 @@ class SimBackend:
 
         if grip is not None:
             self._grip = 1.0 if grip else -1.0
-        self.env.step(pose_to_action(target[:3, 3], target[:3, :3], self._grip))
+        action = pose_to_action(target[:3, 3], target[:3, :3], self._grip)
+        for _ in range(self.substeps):  # one command per 1 / sim_fps seconds of sim time
+            self.env.step(action)
 
     def object_pose_matrix(self) -> np.ndarray:
         return self.env.nut_pose_matrix()

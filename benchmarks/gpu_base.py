@@ -287,7 +287,9 @@ def train(pack_dir: Path, seconds: float, out: Path) -> None:
     print(f"done: {steps} steps in {time.time() - t_train:.0f} s", flush=True)
 
 
-def evaluate(weights: Path, source: Path, work: Path, cells: list[str]) -> None:
+def evaluate(
+    weights: Path, source: Path, work: Path, cells: list[str], eval_batch: int | None = None
+) -> None:
     """Assemble the gpu base checkpoint (+ processors from the dataset's stats) in `work`, wrap it with
     `source`'s inverse policy, run the cells (resumable) and publish the row."""
     sys.path[:0] = [str(HERE), str(REPO / "src")]
@@ -300,6 +302,8 @@ def evaluate(weights: Path, source: Path, work: Path, cells: list[str]) -> None:
     from lerobot_ocr.pipeline import BIN, EVAL_SEED, PUSHT, Stages, eval_args, run
 
     p = dict(PUSHT.profiles["cpu"])
+    if eval_batch:  # episode i has seed EVAL_SEED + i whatever the batch; larger batches use the CPU better
+        p["eval_batch"] = eval_batch
     stage = Stages(work)
     base = work / "base" / "checkpoints" / "last" / "pretrained_model"
     joint = work / "ocr" / "checkpoints" / "last" / "pretrained_model"
@@ -417,6 +421,7 @@ def main() -> None:
     )
     c.add_argument("--workdir", type=Path, default=REPO / "outputs" / "pusht_ocr_gpu")
     c.add_argument("--cells", nargs="*", default=["base_id", "joint_ood", "base_ood", "joint_id"])
+    c.add_argument("--eval-batch", type=int, default=None, help="envs per batch (default: the cpu profile's)")
     args = parser.parse_args()
     if args.command == "pack":
         pack(args.workdir)
@@ -424,7 +429,7 @@ def main() -> None:
         args.out.mkdir(parents=True, exist_ok=True)
         train(PACK if (PACK / "items.pt").exists() else Path(".gpu"), args.seconds, args.out)
     else:
-        evaluate(args.weights, args.source, args.workdir, args.cells)
+        evaluate(args.weights, args.source, args.workdir, args.cells, args.eval_batch)
 
 
 if __name__ == "__main__":

@@ -101,7 +101,8 @@ def body() -> str:
         "protocol (60 policy decisions on Push-T, 30 on Square, no step cap), the budget of the paper's "
         "joint OOD number. Recovery efficiency = joint OOD ÷ base ID, both within the reference budget "
         "(the paper: 0.93 / 0.90 ≈ 1.03). The paper's Push-T base is an image diffusion policy trained on "
-        "a GPU; ours are low-dim diffusion policies trained on 2 CPU cores.\n\n" + table()
+        "a GPU; ours are low-dim diffusion policies, trained on 2 CPU cores (`cpu`) or with Diffusion "
+        "Policy's recipe on one GPU (`gpu`, evaluated on CPU, `benchmarks/gpu_base.py`).\n\n" + table()
     )
 
 

@@ -3,7 +3,7 @@ object pose source. See `keys.py` for the observation/action layout."""
 
 from __future__ import annotations
 
-import logging
+import contextlib
 from functools import cached_property
 
 import numpy as np
@@ -26,8 +26,6 @@ from lerobot_ocr.robots.franka_ocr.keys import (
 )
 from lerobot_ocr.robots.pose.factory import make_pose_source
 from lerobot_ocr.robots.pose.tracker import PoseTracker
-
-log = logging.getLogger(__name__)
 
 
 class FrankaOcr(Robot):
@@ -84,10 +82,9 @@ class FrankaOcr(Robot):
         try:
             backend.connect()
         except Exception:
-            try:
+            with contextlib.suppress(Exception):
                 backend.disconnect()  # whatever part of it started (a controller, a sim)
-            finally:
-                raise
+            raise
         self.backend = backend
         try:
             for camera in self.cameras.values():

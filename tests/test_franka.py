@@ -470,3 +470,14 @@ def test_callable_pose_source_loads_module_function(tmp_path, monkeypatch):
         make_pose_source(CallablePoseSourceConfig(fn="my_estimator.make"))
     with pytest.raises(ValueError, match="no callable"):
         make_pose_source(CallablePoseSourceConfig(fn="my_estimator:nothing"))
+
+
+def test_collect_takes_the_sim_robot_and_points_a_real_one_to_lerobot_rollout():
+    from lerobot_ocr.continual.collect import collect_config_class
+
+    config = collect_config_class()
+    with pytest.raises(ValueError, match="--strategy.type=episodic"):
+        config(robot=FrankaOcrConfig(backend="panda_py"), like="d", root="o")
+    with pytest.raises(ValueError, match="give one"):
+        config(like="d", root="o")
+    assert config(robot=FrankaOcrConfig(), like="d", root="o").robot.backend == "sim"

@@ -1,4 +1,5 @@
-"""`lerobot-ocr collect`: a policy's own rollouts in a sim env, kept as demonstrations (the paper's §V).
+"""`lerobot-ocr collect`: a policy's own rollouts in a sim env or on the sim robot, kept as demonstrations
+(the paper's §V).
 
 OCR's rollouts from out-of-distribution starts become new demonstrations for the base (arXiv
 2411.03294, Section V, Table III). Each batch of envs runs through LeRobot's own
@@ -15,6 +16,11 @@ The dataset has exactly the features, fps and robot type of `--like` (the base's
 so `lerobot-ocr merge` joins them, plus `ocr.in_recovery` (bool per frame: the switch's mode; not an
 observation, so policies never take it as an input). `meta/ocr_collect.json` records the policy,
 env, seeds and, per episode, its seed, success step, first hand-back and frames in recovery.
+
+`--robot.type=franka_ocr --robot.backend=sim` instead of `--env.*` runs the policy on the robot, one
+episode per seed (`reset_scene(seed)`, success from the scene, at most `--max_steps` frames), reading the
+robot the way `lerobot-rollout` does (`build_dataset_frame` with `--like`'s features). A real robot has no
+scene reset or success signal: there, `lerobot-rollout --strategy.type=episodic` records the episodes.
 
 Same guarantees as `lerobot-ocr generate` (`lerobot_ocr.datagen.recording`): a progress bar, one
 atomic cache file per kept episode in `<root>.work/`, resume after an interruption, `<root>` appears
@@ -197,6 +203,88 @@ def _rollout_batch(ctx: dict, seeds: list[int], keep: str, features: dict) -> li
     return rows
 
 
+def _robot_episode(ctx: dict, seed: int, keep: str, features: dict, max_steps: int) -> dict | None:
+    """One episode of the policy on the sim robot from scene `seed`: the kept arrays (as `_rollout_batch`'s
+    rows) or None."""
+    import torch
+    from lerobot.policies.utils import prepare_observation_for_inference
+    from lerobot.utils.feature_utils import build_dataset_frame
+
+    from lerobot_ocr.eval_report import episode_modes
+    from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
+
+    robot, policy = ctx["robot"], ctx["policy"]
+    robot.reset_scene(seed)
+    policy.reset()
+    obs_keys = [k for k in features if k.startswith("observation.")]
+    names = features["action"]["names"]
+    observed, actions, success = {k: [] for k in obs_keys}, [], []
+    with torch.no_grad():
+        for _ in range(max_steps):
+            frame = build_dataset_frame(features, robot.get_observation(), prefix="observation")
+            for key in obs_keys:
+                observed[key].append(frame[key])
+            batch = prepare_observation_for_inference(
+                dict(frame), ctx["device"], ctx["task"], robot.robot_type
+            )
+            action = ctx["post"](policy.select_action(ctx["pre"](batch)))[0].cpu().numpy()
+            robot.send_action(dict(zip(names, map(float, action), strict=True)))
+            actions.append(action)
+            success.append(robot.backend.task_success())
+            if success[-1]:
+                break
+    steps = len(actions)
+    obs = {}
+    for (
+        key,
+        values,
+    ) in observed.items():  # as lerobot_eval.rollout gives them: (1, T, ...), images CHW in [0, 1]
+        values = torch.as_tensor(np.stack(values))
+        if features[key]["dtype"] in ("image", "video"):
+            values = values.permute(0, 3, 1, 2).float() / 255
+        obs[key] = values[None]
+    success_arr = np.asarray(success, bool)
+    data = {
+        "observation": obs,
+        "action": torch.as_tensor(np.stack(actions))[None],
+        "reward": torch.as_tensor(success_arr, dtype=torch.float32)[None],
+        "success": torch.as_tensor(success_arr)[None],
+    }
+    if isinstance(policy, OcrJointPolicy):
+        modes = np.asarray(policy.ocr_stats()["in_recovery"], bool)[:steps, 0]
+    else:
+        modes = np.zeros(steps, bool)
+    kept = kept_length(success_arr, modes, steps, keep)
+    if kept == 0:
+        return None
+    arrays = episode_arrays(data, 0, kept, modes, features)
+    arrays["_success_step"] = np.array(steps if success_arr[-1] else -1)
+    arrays["_first_handback_step"] = np.array(episode_modes(modes[:, None], [steps])["first_base_step"][0])
+    return arrays
+
+
+def _setup_robot(cfg, meta) -> dict:
+    """The robot (connected), policy and processors as `lerobot-rollout` builds them."""
+    from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+    from lerobot.robots.utils import make_robot_from_config
+
+    policy = get_policy_class(cfg.policy.type).from_pretrained(cfg.policy.pretrained_path, config=cfg.policy)
+    policy.eval()
+    device = str(policy.config.device)
+    pre, post = make_pre_post_processors(
+        policy_cfg=cfg.policy,
+        pretrained_path=cfg.policy.pretrained_path,
+        preprocessor_overrides={
+            "device_processor": {"device": device},
+            "rename_observations_processor": {"rename_map": cfg.rename_map},
+        },
+    )
+    robot = make_robot_from_config(cfg.robot)
+    robot.connect()
+    task = str(meta.tasks.index[0]) if len(meta.tasks) == 1 else ""
+    return {"robot": robot, "policy": policy, "pre": pre, "post": post, "device": device, "task": task}
+
+
 def _setup(cfg) -> dict:
     """Env, policy and processors exactly as `lerobot-eval`'s `eval_main` builds them."""
     from lerobot.envs.factory import make_env, make_env_pre_post_processors
@@ -272,31 +360,49 @@ def collect(cfg) -> object:
     root = Path(cfg.root)
     meta = LeRobotDatasetMetadata("local/like", root=like)
     features, use_videos = like_features(meta)
+    source = cfg.robot if cfg.robot is not None else cfg.env
     settings = {
         "policy": str(cfg.policy.pretrained_path),
         "policy_type": cfg.policy.type,
-        "env": json.loads(json.dumps(asdict(cfg.env), default=str)),
+        ("robot" if cfg.robot is not None else "env"): json.loads(json.dumps(asdict(source), default=str)),
         "keep": cfg.keep,
         "seed": cfg.seed,
-        "batch_size": cfg.eval.batch_size,
+        "batch_size": 1 if cfg.robot is not None else cfg.eval.batch_size,
         "like": str(like.resolve()),
     }
+    if cfg.robot is not None:
+        settings["max_steps"] = cfg.max_steps
     work = work_dir(root, cfg.overwrite)
     set_seed(cfg.seed)
-    ctx = _setup(cfg)
-    paths = collect_episodes(
-        work,
-        settings,
-        cfg.episodes,
-        cfg.seed,
-        lambda seeds: _rollout_batch(ctx, seeds, cfg.keep, features),
-        desc=f"Collecting with {cfg.policy.type} (--keep={cfg.keep})",
-        max_attempts=cfg.max_attempts,
-        replace_stale=cfg.overwrite,
-        batch_size=cfg.eval.batch_size,
-    )
-    task = _task(ctx["env"], meta)
-    ctx["env"].close()
+    if cfg.robot is not None:
+        ctx = _setup_robot(cfg, meta)
+
+        def record(seeds):
+            return [_robot_episode(ctx, s, cfg.keep, features, cfg.max_steps) for s in seeds]
+    else:
+        ctx = _setup(cfg)
+
+        def record(seeds):
+            return _rollout_batch(ctx, seeds, cfg.keep, features)
+
+    try:
+        paths = collect_episodes(
+            work,
+            settings,
+            cfg.episodes,
+            cfg.seed,
+            record,
+            desc=f"Collecting with {cfg.policy.type} (--keep={cfg.keep})",
+            max_attempts=cfg.max_attempts,
+            replace_stale=cfg.overwrite,
+            batch_size=settings["batch_size"],
+        )
+        task = ctx["task"] if cfg.robot is not None else _task(ctx["env"], meta)
+    finally:
+        if cfg.robot is not None:
+            ctx["robot"].disconnect()
+        else:
+            ctx["env"].close()
     ledger = json.loads((work / "ledger.json").read_text())
     ds = build_dataset(
         paths,
@@ -316,10 +422,16 @@ def collect(cfg) -> object:
 def collect_config_class():
     """`CollectConfig`: lerobot-eval's `EvalPipelineConfig` (`--policy.path`, `--env.*`, `--eval.batch_size`,
     `--seed`, `--rename_map`) plus the collection's own fields. Built lazily: it imports LeRobot."""
+    global EnvConfig, RobotConfig  # draccus resolves the (string) annotations in this module's namespace
     from lerobot.configs.eval import EvalPipelineConfig
+    from lerobot.envs.configs import EnvConfig
+    from lerobot.robots.config import RobotConfig
 
     @dataclass
     class CollectConfig(EvalPipelineConfig):
+        env: EnvConfig | None = None  # a sim env (`--env.type=…`), or:
+        robot: RobotConfig | None = None  # the sim robot (`--robot.type=franka_ocr --robot.backend=sim`)
+        max_steps: int = 400  # per robot episode (an env's own episode length applies to envs)
         like: str = ""  # root of the dataset to match (the base's training data)
         root: str = ""  # output folder of the collected dataset
         repo_id: str = "local/ocr_collected"
@@ -338,6 +450,17 @@ def collect_config_class():
                 raise ValueError(
                     "lerobot-ocr collect needs --like=<base dataset root> and --root=<output folder>."
                 )
+            if (self.env is None) == (self.robot is None):
+                raise ValueError("lerobot-ocr collect runs either --env.type=… or --robot.type=…: give one.")
+            if self.robot is not None and getattr(self.robot, "backend", None) != "sim":
+                raise ValueError(
+                    "lerobot-ocr collect drives a robot only in sim (it resets the scene and reads success "
+                    "from it). On a real robot record OCR episodes with `lerobot-rollout "
+                    "--strategy.type=episodic --policy.path=<ocr_joint> --robot.type=franka_ocr …` "
+                    "(← discards a failed episode)."
+                )
+            if self.max_steps < 1:
+                raise ValueError(f"--max_steps must be >= 1, got {self.max_steps}.")
 
     return CollectConfig
 

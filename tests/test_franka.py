@@ -290,7 +290,7 @@ def test_panda_py_backend_calls_units_and_quaternion_order(monkeypatch):
     assert np.allclose(np.diag(rec["controller"].kwargs["impedance"]), [600] * 3 + [40] * 3)
     assert [c[0] for c in rec["gripper"].calls] == ["move"]  # opened at connect (matches the latch)
     backend.command(pose(rot_z(math.pi / 2), (0.5, 0.0, 0.3)), grip=True)
-    backend._worker.submit(lambda: None).result()  # the gripper thread is done
+    backend.gripper.wait()  # the gripper thread is done
     assert backend.gripper_width() == 0.079
     backend.disconnect()
     name, (position, quat), _ = rec["controller"].calls[-1]
@@ -331,7 +331,7 @@ def test_panda_py_reflex_and_gripper_fault_surface(monkeypatch):
 
     rec["gripper"].grasp = grasp
     backend.command(pose(), grip=True)
-    backend._worker.submit(lambda: None).result()
+    backend.gripper.wait()
     with pytest.raises(RuntimeError, match="gripper failed.*command failed"):
         backend.command(pose(), grip=None)
 
@@ -380,7 +380,8 @@ def test_franky_backend_calls_units_and_quaternion_order(monkeypatch):
     backend.connect()
     np.testing.assert_allclose(backend.ee_pose(), pose(rot_z(math.pi / 2), (0.4, 0.0, 0.3)), atol=1e-9)
     backend.command(pose(rot_z(math.pi / 2), (0.5, 0.0, 0.3)), grip=True)
-    backend._worker.submit(lambda: None).result()
+    backend.gripper.wait()
+    assert backend.gripper_width() == 0.081
     backend.disconnect()
     move = [c for c in robot.calls if c[0] == "move"][-1]
     _, affine, ref = move[1][0]
@@ -389,7 +390,6 @@ def test_franky_backend_calls_units_and_quaternion_order(monkeypatch):
     np.testing.assert_allclose(affine[2], [0, 0, half, half], atol=1e-9)  # x, y, z, w
     assert [c[0] for c in gripper.calls] == ["move", "grasp"]  # opened at connect, then the grasp
     assert gripper.calls[0][1] == (0.08, 0.1) and gripper.calls[1][1][:3] == (0.04, 0.1, 28.0)
-    assert backend.gripper_width() == 0.081
 
 
 # -- pose sources ------------------------------------------------------------------------------------

@@ -5,13 +5,12 @@ Frame: the robot base (m); franky's quaternions are scalar-last (x, y, z, w)."""
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 import torch
 
 from lerobot_ocr.geometry.rotations import matrix_to_quaternion, quaternion_to_matrix
 from lerobot_ocr.robots.franka_ocr.backends import connect_hint, import_backend
+from lerobot_ocr.robots.franka_ocr.backends.gripper import GripperWorker
 
 
 class FrankyBackend:
@@ -19,10 +18,8 @@ class FrankyBackend:
 
     def __init__(self, config):
         self.config = config
-        self.robot = self.gripper = self._franky = None
-        self._worker: ThreadPoolExecutor | None = None
-        self._grip_errors: list[BaseException] = []
-        self._width = 0.0
+        self.robot = self._franky = None
+        self.gripper: GripperWorker | None = None
 
     @property
     def is_connected(self) -> bool:
@@ -34,15 +31,14 @@ class FrankyBackend:
         realtime = franky.RealtimeConfig.Enforce if cfg.realtime else franky.RealtimeConfig.Ignore
         try:
             self.robot = franky.Robot(cfg.host, realtime_config=realtime)
-            self.gripper = franky.Gripper(cfg.host)
+            self.gripper = GripperWorker(franky.Gripper(cfg.host), cfg, lambda g: g.width)
         except Exception as e:
             self.robot = None
             raise ConnectionError(connect_hint(cfg.host, e)) from e
         self.robot.relative_dynamics_factor = 0.1
         self.robot.recover_from_errors()
         self.robot.move(franky.JointMotion(list(cfg.home_joints)))
-        self._grip(False)  # open, so the gripper matches the robot's open latch
-        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="franka_gripper")
+        self.gripper.set(False)  # open, so the gripper matches the robot's open latch
 
     def ee_pose(self) -> np.ndarray:
         pose = self.robot.current_cartesian_state.pose.end_effector_pose
@@ -53,33 +49,16 @@ class FrankyBackend:
         return out
 
     def gripper_width(self) -> float:
-        return self._width  # read after each grasp / move: a live read takes about 0.1 s
-
-    def _grip(self, close: bool) -> None:
-        cfg = self.config
-        if close:
-            self.gripper.grasp(
-                cfg.grasp_width, cfg.gripper_speed, cfg.grasp_force, cfg.grasp_epsilon, cfg.grasp_epsilon
-            )
-        else:
-            self.gripper.move(cfg.gripper_open_width, cfg.gripper_speed)
-        self._width = float(self.gripper.width)
-
-    def _grip_logged(self, close: bool) -> None:
-        try:
-            self._grip(close)
-        except Exception as e:  # noqa: BLE001  (raised on the next command)
-            self._grip_errors.append(e)
+        return self.gripper.width  # read after each grasp / move: a live read takes about 0.1 s
 
     def command(self, target: np.ndarray, grip: bool | None) -> None:
-        if self._grip_errors:
-            raise RuntimeError(f"the gripper failed: {self._grip_errors.pop(0)}")
+        self.gripper.check()
         f = self._franky
         quat_xyzw = matrix_to_quaternion(torch.as_tensor(target[:3, :3]), convention="xyzw").numpy()
         motion = f.CartesianMotion(f.Affine(np.asarray(target[:3, 3]), quat_xyzw), f.ReferenceType.Absolute)
         self.robot.move(motion, asynchronous=True)
         if grip is not None:  # grasp / move block for about a second: off the control thread
-            self._worker.submit(self._grip_logged, grip)
+            self.gripper.submit(grip)
 
     def stop(self) -> None:
         if self.robot is not None:
@@ -90,6 +69,6 @@ class FrankyBackend:
             if self.robot is not None:
                 self.robot.stop()
         finally:
-            if self._worker is not None:
-                self._worker.shutdown(wait=True, cancel_futures=True)
-            self.robot = self.gripper = self._worker = None
+            if self.gripper is not None:
+                self.gripper.shutdown()
+            self.robot = self.gripper = None

@@ -27,7 +27,6 @@ import argparse
 import datetime as dt
 import json
 import platform
-import shutil
 import sys
 from pathlib import Path
 
@@ -41,7 +40,7 @@ from lerobot_ocr.pipeline import (  # noqa: E402
     CELLS,
     TASKS,
     Stages,
-    eval_args,
+    evaluate_cell,
     run,
     run_chain,
     save_freq,
@@ -121,7 +120,7 @@ def finetune_args(p: dict, base_ckpt: Path, data: Path, repo_id: str, out: Path)
 
 
 def main() -> None:
-    from lerobot_ocr.eval_report import format_table, paired_outcomes, summarize
+    from lerobot_ocr.eval_report import format_table, paired_outcomes
 
     args = parse_args()
     task, p = args.task_, args.settings
@@ -203,13 +202,7 @@ def main() -> None:
             out = here / f"eval_{name}"
 
             def evaluate(ckpt=ckpt, region=region, out=out):
-                shutil.rmtree(out, ignore_errors=True)
-                run(eval_args(task, ckpt, region, p, out), logs / f"eval_{name}.log")
-                read = (
-                    json.loads((out / f).read_text()) if (out / f).exists() else None
-                    for f in ("eval_info.json", "ocr_stats.json", "episodes.json")
-                )
-                return summarize(*read)
+                return evaluate_cell(task, ckpt, region, p, out, logs / f"eval_{name}.log")
 
             results[name] = stage(f"eval_{name}", evaluate)
 

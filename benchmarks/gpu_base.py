@@ -298,8 +298,8 @@ def evaluate(
     from results_md import update_section
     from summary import write as write_summary
 
-    from lerobot_ocr.eval_report import format_table, summarize
-    from lerobot_ocr.pipeline import BIN, EVAL_SEED, PUSHT, Stages, eval_args, run
+    from lerobot_ocr.eval_report import format_table
+    from lerobot_ocr.pipeline import BIN, EVAL_SEED, PUSHT, Stages, evaluate_cell, run
 
     p = dict(PUSHT.profiles["cpu"])
     if eval_batch:  # episode i has seed EVAL_SEED + i whatever the batch; larger batches use the CPU better
@@ -348,10 +348,7 @@ def evaluate(
         out = work / f"eval_{name}"
 
         def cell(ckpt=ckpt, region=region, out=out, name=name):
-            shutil.rmtree(out, ignore_errors=True)
-            run(eval_args(PUSHT, ckpt, region, p, out), work / "logs" / f"eval_{name}.log")
-            read = lambda f: json.loads((out / f).read_text()) if (out / f).exists() else None  # noqa: E731
-            return summarize(read("eval_info.json"), read("ocr_stats.json"), read("episodes.json"))
+            return evaluate_cell(PUSHT, ckpt, region, p, out, work / "logs" / f"eval_{name}.log")
 
         results[name] = stage(f"eval_{name}", cell)
     table = format_table(results)

@@ -230,13 +230,32 @@ def eval_args(
     ]
 
 
+def evaluate_cell(
+    task: Task, policy: Path, region: str, p: dict, out: Path, log: Path, env_args: list[str] = ()
+) -> dict:
+    """Run one cell (`eval_args`) into a fresh `out` and return its summary (`eval_report.summarize` of
+    `eval_info.json`, plus `ocr_stats.json` / `episodes.json` where the run wrote them).
+
+    Raises:
+        RuntimeError: the eval failed (see `run`).
+    """
+    from lerobot_ocr.eval_report import summarize
+
+    shutil.rmtree(out, ignore_errors=True)
+    run(eval_args(task, policy, region, p, out, env_args), log)
+    read = (
+        json.loads((out / f).read_text()) if (out / f).exists() else None
+        for f in ("eval_info.json", "ocr_stats.json", "episodes.json")
+    )
+    return summarize(*read)
+
+
 def run_chain(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> Chain:
     """Run (or resume) the chain for profile settings `p` in `work`; evaluate `p["cells"]` (default all).
 
     Raises:
         RuntimeError: a stage failed (its log's tail is in the message; a re-run resumes at that stage).
     """
-    from lerobot_ocr.eval_report import summarize
 
     work.mkdir(parents=True, exist_ok=True)
     logs, stage = work / "logs", Stages(work)
@@ -322,14 +341,7 @@ def run_chain(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> Chai
         out = eval_dirs[name] = work / f"eval_{name}"
 
         def evaluate(ckpt=ckpt, region=region, out=out, name=name):
-            shutil.rmtree(out, ignore_errors=True)
-            run(eval_args(task, ckpt, region, p, out, env_args), logs / f"eval_{name}.log")
-            info = json.loads((out / "eval_info.json").read_text())
-            ocr, episodes = (
-                json.loads((out / name).read_text()) if (out / name).exists() else None
-                for name in ("ocr_stats.json", "episodes.json")
-            )
-            return summarize(info, ocr, episodes)
+            return evaluate_cell(task, ckpt, region, p, out, logs / f"eval_{name}.log", env_args)
 
         results[name] = stage(f"eval_{name}", evaluate)
     return Chain(results, eval_dirs, base_ckpt, ocr_ckpt, converted, stage.times)

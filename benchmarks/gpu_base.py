@@ -251,6 +251,7 @@ def train(pack_dir: Path, seconds: float, out: Path) -> None:
         cfg.save_pretrained(out)
         info = {
             "recipe": RECIPE,
+            "seconds_asked": seconds,
             "steps_planned": steps,
             "steps_done": step,
             "items": n,
@@ -379,6 +380,7 @@ def evaluate(
     (HERE / "results" / "pusht_gpu.json").write_text(json.dumps(payload, indent=2) + "\n")
     write_summary()
     minutes = train_log["train_seconds"] / 60
+    batch_flag = f" --eval-batch {eval_batch}" if eval_batch else ""
     update_section(
         "Push-T (gpu)",
         f"""
@@ -394,8 +396,9 @@ per cell, env seeds {EVAL_SEED}+i, evaluated on CPU; {PUSHT.episode_length}-step
 
 Machine: {payload["machine"]}. Date: {payload["date"]}.
 
-Command: `python3 benchmarks/gpu_base.py train --seconds … --out $OUT` on the GPU machine after
-`benchmarks/gpu_base.py pack`, then `.venv/bin/python benchmarks/gpu_base.py evaluate --weights <its output>`.
+Commands: `.venv/bin/python benchmarks/gpu_base.py pack --workdir {source}`; on the GPU machine
+`python3 benchmarks/gpu_base.py train --seconds {train_log.get("seconds_asked", "…")} --out $OUT`; here
+`.venv/bin/python benchmarks/gpu_base.py evaluate --weights {weights} --source {source}{batch_flag}`.
 """,
     )
 

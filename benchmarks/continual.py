@@ -269,10 +269,7 @@ def main() -> None:
     }
     out = HERE / "results" / f"{task.name}_continual_{label}{suffix}.json"
     out.write_text(json.dumps(record, indent=2, default=str))
-    command = (
-        f"`.venv/bin/python benchmarks/continual.py --task {task.name} --profile {args.profile} "
-        f"--keep {args.keep}" + (f" --workdir {work} --set {' '.join(args.set)}" if args.set else "") + "`"
-    )
+    command = f"`.venv/bin/python benchmarks/continual.py {' '.join(sys.argv[1:])}`"  # as run
     update_section(
         f"Continual learning ({task.title}, {label}{', ' + args.keep if suffix else ''})",
         f"{command} on {record['machine']}, {record['date']}. Paper (Table III): {PAPER[task.name]}. "

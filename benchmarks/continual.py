@@ -119,6 +119,84 @@ def finetune_args(p: dict, base_ckpt: Path, data: Path, repo_id: str, out: Path)
     ]
 
 
+def collect(task, p: dict, ocr_ckpt: Path, base_data: Path, collected: Path, keep: str, log: Path) -> dict:
+    """`lerobot-ocr collect` with the joint policy `ocr_ckpt` from OOD starts (seeds COLLECT_SEED+):
+    `p["collect"]` kept episodes in `collected`, with `base_data`'s features; returns the line's counts."""
+    obs = "environment_state_agent_pos" if p["base"] == "lowdim" and task.name == "pusht" else None
+    run(
+        [
+            str(BIN / "lerobot-ocr"),
+            "collect",
+            f"--policy.path={ocr_ckpt}",
+            f"--env.type={task.env_type}",
+            "--env.region=ood",
+            *([f"--env.obs_type={obs}"] if obs else []),
+            *task.eval_overrides,
+            *([f"--env.episode_length={task.step_budget}"] if task.step_budget else []),
+            f"--like={base_data}",
+            f"--root={collected}",
+            f"--repo_id=local/{task.name}_collected",
+            f"--episodes={p['collect']}",
+            f"--keep={keep}",
+            f"--eval.batch_size={p['eval_batch']}",
+            "--eval.use_async_envs=false",
+            f"--policy.device={p['device']}",
+            f"--seed={COLLECT_SEED}",
+            f"--max_attempts={20 * p['collect'] + 20}",
+            "--overwrite=true",
+        ],
+        log,
+    )
+    side = json.loads((collected / "meta" / "ocr_collect.json").read_text())
+    frames = [e["frames"] for e in side["episodes"]]
+    return {
+        "attempts": side["attempts"],
+        "kept_episodes": len(frames),
+        "kept_frames": sum(frames),
+        "frames_in_recovery": sum(e["frames_in_recovery"] for e in side["episodes"]),
+        "started_in_recovery": sum(e["started_in_recovery"] for e in side["episodes"]),
+    }
+
+
+def merge(task, base_data: Path, collected: Path, merged: Path, log: Path) -> dict:
+    """`lerobot-ocr merge` of the base's data and the collected episodes into `merged` (local/<task>_aug)."""
+    run(
+        [
+            str(BIN / "lerobot-ocr"),
+            "merge",
+            "--base",
+            str(base_data),
+            "--add",
+            str(collected),
+            "--output-root",
+            str(merged),
+            "--output-repo-id",
+            f"local/{task.name}_aug",
+            "--overwrite",
+        ],
+        log,
+    )
+    info = json.loads((merged / "meta" / "info.json").read_text())
+    base_info = json.loads((base_data / "meta" / "info.json").read_text())
+    return {"frames": info["total_frames"], "base_frames": base_info["total_frames"]}
+
+
+def collection_line(keep: str, c: dict, data: dict) -> str:
+    ratio = c["kept_episodes"] / max(1, c["attempts"])
+    return (
+        f"Collection (`--keep={keep}`): {c['kept_episodes']} episodes kept of {c['attempts']} attempts "
+        f"({ratio:.2f}), {c['kept_frames']} frames ({c['frames_in_recovery']} in recovery) added to the "
+        f"base's {data['base_frames']}"
+    )
+
+
+def paired_line(paired: dict) -> str:
+    return (
+        f"Paired ID check (same {paired['episodes']} seeds): both solved {paired['both']}, only the base "
+        f"{paired['only_a']}, only the augmented base {paired['only_b']}, neither {paired['neither']}."
+    )
+
+
 def main() -> None:
     from lerobot_ocr.eval_report import format_table, paired_outcomes
 
@@ -130,67 +208,12 @@ def main() -> None:
     here.mkdir(parents=True, exist_ok=True)
     stage, logs = Stages(here), here / "logs"
     base_data, collected, merged = work / "base_data", here / "collected", here / "merged"
-    obs = "environment_state_agent_pos" if p["base"] == "lowdim" and task.name == "pusht" else None
 
-    def collect():
-        run(
-            [
-                str(BIN / "lerobot-ocr"),
-                "collect",
-                f"--policy.path={chain.ocr_ckpt}",
-                f"--env.type={task.env_type}",
-                "--env.region=ood",
-                *([f"--env.obs_type={obs}"] if obs else []),
-                *task.eval_overrides,
-                *([f"--env.episode_length={task.step_budget}"] if task.step_budget else []),
-                f"--like={base_data}",
-                f"--root={collected}",
-                f"--repo_id=local/{task.name}_collected",
-                f"--episodes={p['collect']}",
-                f"--keep={args.keep}",
-                f"--eval.batch_size={p['eval_batch']}",
-                "--eval.use_async_envs=false",
-                f"--policy.device={p['device']}",
-                f"--seed={COLLECT_SEED}",
-                f"--max_attempts={20 * p['collect'] + 20}",
-                "--overwrite=true",
-            ],
-            logs / "collect.log",
-        )
-        side = json.loads((collected / "meta" / "ocr_collect.json").read_text())
-        frames = [e["frames"] for e in side["episodes"]]
-        return {
-            "attempts": side["attempts"],
-            "kept_episodes": len(frames),
-            "kept_frames": sum(frames),
-            "frames_in_recovery": sum(e["frames_in_recovery"] for e in side["episodes"]),
-            "started_in_recovery": sum(e["started_in_recovery"] for e in side["episodes"]),
-        }
-
-    collection = stage("collect", collect)
-
-    def merge():
-        run(
-            [
-                str(BIN / "lerobot-ocr"),
-                "merge",
-                "--base",
-                str(base_data),
-                "--add",
-                str(collected),
-                "--output-root",
-                str(merged),
-                "--output-repo-id",
-                f"local/{task.name}_aug",
-                "--overwrite",
-            ],
-            logs / "merge.log",
-        )
-        info = json.loads((merged / "meta" / "info.json").read_text())
-        base_info = json.loads((base_data / "meta" / "info.json").read_text())
-        return {"frames": info["total_frames"], "base_frames": base_info["total_frames"]}
-
-    data = stage("merge", merge)
+    collection = stage(
+        "collect",
+        lambda: collect(task, p, chain.ocr_ckpt, base_data, collected, args.keep, logs / "collect.log"),
+    )
+    data = stage("merge", lambda: merge(task, base_data, collected, merged, logs / "merge.log"))
     results = {
         name: chain.results[name]
         for name in ("base_id", "base_ood", "joint_ood", "joint_id")
@@ -236,18 +259,10 @@ def main() -> None:
             json.loads((here / "eval_aug_base_id" / "episodes.json").read_text()),
         )
     table = format_table(results)
-    ratio = collection["kept_episodes"] / max(1, collection["attempts"])
-    c = collection
-    lines = [
-        f"Collection (`--keep={args.keep}`): {c['kept_episodes']} episodes kept of {c['attempts']} attempts "
-        f"({ratio:.2f}), {c['kept_frames']} frames ({c['frames_in_recovery']} in recovery) added to the "
-        f"base's {data['base_frames']}; base and control fine-tuned {p['ft_steps']} steps.",
-    ]
+    line = collection_line(args.keep, collection, data)
+    lines = [f"{line}; base and control fine-tuned {p['ft_steps']} steps."]
     if paired:
-        lines.append(
-            f"Paired ID check (same {paired['episodes']} seeds): both solved {paired['both']}, only the base "
-            f"{paired['only_a']}, only the augmented base {paired['only_b']}, neither {paired['neither']}."
-        )
+        lines.append(paired_line(paired))
     print(table + "\n\n" + "\n".join(lines))
     if args.no_update:
         return

@@ -95,16 +95,15 @@ def base_config(meta):
     return cfg
 
 
-def pack(workdir: Path, out: Path = PACK) -> None:
-    """Write `out/items.pt` (every normalised training item), `out/config/config.json` and `out/site`."""
+def pack(data: Path, repo_id: str = "local/pusht_base", out: Path = PACK) -> None:
+    """Write `out/items.pt` (every normalised training item of the dataset at `data`, normalised with its
+    own statistics), `out/config/config.json` and `out/site`."""
     import torch
     from lerobot.datasets import EpisodeAwareSampler, LeRobotDataset
     from lerobot.datasets.factory import resolve_delta_timestamps
     from lerobot.policies.factory import make_pre_post_processors
     from tqdm import tqdm
 
-    data = workdir / "base_data"
-    repo_id = "local/pusht_base"
     meta = LeRobotDataset(repo_id, root=data).meta
     cfg = base_config(meta)
     ds = LeRobotDataset(repo_id, root=data, delta_timestamps=resolve_delta_timestamps(cfg, meta))
@@ -128,7 +127,7 @@ def pack(workdir: Path, out: Path = PACK) -> None:
     (out / "config").mkdir(parents=True)
     torch.save(batch, out / "items.pt")
     cfg.save_pretrained(out / "config")
-    (out / "source.json").write_text(json.dumps({"workdir": str(workdir), "items": len(indices)}))
+    (out / "source.json").write_text(json.dumps({"data": str(data), "items": len(indices)}))
     site = Path(next(p for p in sys.path if p.endswith("site-packages")))
     for name in PACKAGES:
         for src in [site / name, *site.glob(f"{name}-*.dist-info")]:
@@ -163,10 +162,10 @@ def _import_lerobot(site: Path) -> None:
             sys.modules[name] = _Stub(name, (), {"__spec__": importlib.machinery.ModuleSpec(name, None)})
 
 
-def train(pack_dir: Path, seconds: float, out: Path) -> None:
-    """Train the base for about `seconds` on the GPU; write to `out` its config.json, its EMA weights as
-    fp16 shards `ema_fp16_<i>.safetensors` (refreshed every minute, so a cut run still returns them) and
-    train_log.json."""
+def train(pack_dir: Path, seconds: float, out: Path, steps: int | None = None) -> None:
+    """Train the base for about `seconds` on the GPU (or exactly `steps` steps); write to `out` its
+    config.json, its EMA weights as fp16 shards `ema_fp16_<i>.safetensors` (refreshed every minute, so a
+    cut run still returns them) and train_log.json."""
     t0 = time.time()
     _import_lerobot(pack_dir / "site")
     import torch
@@ -222,8 +221,9 @@ def train(pack_dir: Path, seconds: float, out: Path) -> None:
         ema.update_parameters(policy)
     sync()
     rate = probe / (time.time() - t_probe)
-    steps = max(1, int(rate * (seconds - (time.time() - t0) - 20)))
-    print(f"{rate:.1f} steps/s -> {steps} steps", flush=True)
+    steps_asked = steps
+    steps = steps or max(1, int(rate * (seconds - (time.time() - t0) - 20)))
+    print(f"{rate:.1f} steps/s -> {steps} steps (≈ {steps / rate:.0f} s)", flush=True)
 
     policy, optimizer = build()
     scheduler = get_cosine_schedule_with_warmup(optimizer, RECIPE["warmup"], steps)
@@ -252,6 +252,7 @@ def train(pack_dir: Path, seconds: float, out: Path) -> None:
         info = {
             "recipe": RECIPE,
             "seconds_asked": seconds,
+            "steps_asked": steps_asked,
             "steps_planned": steps,
             "steps_done": step,
             "items": n,
@@ -288,14 +289,36 @@ def train(pack_dir: Path, seconds: float, out: Path) -> None:
     print(f"done: {steps} steps in {time.time() - t_train:.0f} s", flush=True)
 
 
+def assemble_checkpoint(weights: Path, out: Path, data: Path, repo_id: str) -> None:
+    """A LeRobot `DiffusionPolicy` checkpoint in `out` from the train command's folder `weights` (config and
+    fp16 EMA shards, loaded back as fp32), with pre/post-processors from the statistics of the dataset at
+    `data` (the one `pack` normalised the items with)."""
+    from lerobot.configs.policies import PreTrainedConfig
+    from lerobot.datasets import LeRobotDatasetMetadata
+    from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
+    from lerobot.policies.factory import make_pre_post_processors
+    from safetensors.torch import load_file
+
+    cfg = PreTrainedConfig.from_pretrained(weights)
+    cfg.device = "cpu"
+    policy = DiffusionPolicy(cfg)
+    state = {}
+    for shard in sorted(weights.glob("ema_fp16_*.safetensors")):
+        state.update(load_file(shard))
+    policy.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
+    shutil.rmtree(out, ignore_errors=True)
+    policy.save_pretrained(out)
+    meta = LeRobotDatasetMetadata(repo_id, root=data)
+    for processor in make_pre_post_processors(cfg, dataset_stats=meta.stats):
+        processor.save_pretrained(out)
+
+
 def evaluate(
     weights: Path, source: Path, work: Path, cells: list[str], eval_batch: int | None = None
 ) -> None:
     """Assemble the gpu base checkpoint (+ processors from the dataset's stats) in `work`, wrap it with
     `source`'s inverse policy, run the cells (resumable) and publish the row."""
     sys.path[:0] = [str(HERE), str(REPO / "src")]
-    from lerobot.datasets import LeRobotDatasetMetadata
-    from lerobot.policies.factory import make_pre_post_processors
     from results_md import update_section
     from summary import write as write_summary
 
@@ -312,22 +335,7 @@ def evaluate(
     train_log = json.loads((weights / "train_log.json").read_text())
 
     def assemble():
-        from lerobot.configs.policies import PreTrainedConfig
-        from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
-        from safetensors.torch import load_file
-
-        cfg = PreTrainedConfig.from_pretrained(weights)
-        cfg.device = "cpu"
-        policy = DiffusionPolicy(cfg)
-        state = {}
-        for shard in sorted(weights.glob("ema_fp16_*.safetensors")):
-            state.update(load_file(shard))
-        policy.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
-        shutil.rmtree(base, ignore_errors=True)
-        policy.save_pretrained(base)
-        meta = LeRobotDatasetMetadata("local/pusht_base", root=source / "base_data")
-        for processor in make_pre_post_processors(cfg, dataset_stats=meta.stats):
-            processor.save_pretrained(base)
+        assemble_checkpoint(weights, base, source / "base_data", "local/pusht_base")
         (work / "train_log.json").write_text(json.dumps(train_log, indent=1))
         shutil.rmtree(joint, ignore_errors=True)
         run(
@@ -403,6 +411,142 @@ Commands: `.venv/bin/python benchmarks/gpu_base.py pack --workdir {source}`; on 
     )
 
 
+def _cpu_profile(eval_batch: int | None) -> dict:
+    sys.path[:0] = [str(HERE), str(REPO / "src")]
+    from lerobot_ocr.pipeline import PUSHT
+
+    p = dict(PUSHT.profiles["cpu"])
+    if eval_batch:  # episode i has seed EVAL_SEED + i whatever the batch; larger batches use the CPU better
+        p["eval_batch"] = eval_batch
+    return p
+
+
+def continual_pack(work: Path, source: Path, collect_episodes: int, eval_batch: int | None) -> None:
+    """The gpu row's continual-learning data: its joint policy (in `work`) collects `collect_episodes`
+    successful OOD episodes (`benchmarks/continual.py`'s collect stage), merged with `source`'s base data,
+    packed into `.gpu/` for `train`. Stages resume, in `work/continual_episode/`."""
+    from continual import collect, merge
+
+    from lerobot_ocr.pipeline import PUSHT, Stages
+
+    p = {**_cpu_profile(eval_batch), "collect": collect_episodes}
+    here = work / "continual_episode"
+    stage, logs = Stages(here), here / "logs"
+    joint = work / "ocr" / "checkpoints" / "last" / "pretrained_model"
+    base_data = source / "base_data"
+    stage(
+        "collect",
+        lambda: collect(PUSHT, p, joint, base_data, here / "collected", "episode", logs / "collect.log"),
+    )
+    stage("merge", lambda: merge(PUSHT, base_data, here / "collected", here / "merged", logs / "merge.log"))
+    pack(here / "merged", "local/pusht_aug")
+
+
+def continual_evaluate(weights: Path, work: Path, source: Path, eval_batch: int | None) -> None:
+    """The gpu row's Table III: the base retrained from scratch on the merged data with the same recipe, steps
+    and seed as the gpu base (so the gpu base is the control: same training, the demos alone), evaluated
+    alone and inside the joint policy (`lerobot-ocr rebase`), ID and OOD; a paired ID check against the gpu
+    base. Writes `benchmarks/results/pusht_continual_gpu.json` and RESULTS.md's section."""
+    from continual import PAPER, collection_line, paired_line
+    from results_md import update_section
+
+    from lerobot_ocr.continual.rebase import rebase
+    from lerobot_ocr.eval_report import format_table, paired_outcomes
+    from lerobot_ocr.pipeline import PUSHT, Stages, evaluate_cell
+
+    p = _cpu_profile(eval_batch)
+    here = work / "continual_episode"
+    stage, logs = Stages(here), here / "logs"
+    aug = here / "base_aug" / "checkpoints" / "last" / "pretrained_model"
+    joint_aug = here / "joint_aug"
+    train_log = json.loads((weights / "train_log.json").read_text())
+    base_log = json.loads((work / "train_log.json").read_text())
+    if train_log["recipe"] != base_log["recipe"] or train_log["steps_done"] != base_log["steps_done"]:
+        raise SystemExit(
+            f"{weights} was not trained like the gpu base in {work} (recipe or steps differ: "
+            f"{train_log['steps_done']} vs {base_log['steps_done']}); the gpu base would not be its control. "
+            f"Train with `train --steps {base_log['steps_done']}`."
+        )
+
+    def assemble():
+        assemble_checkpoint(weights, aug, here / "merged", "local/pusht_aug")
+        (here / "train_log.json").write_text(json.dumps(train_log, indent=1))
+        rebase(work / "ocr" / "checkpoints" / "last" / "pretrained_model", aug, joint_aug, overwrite=True)
+        return {"steps": train_log["steps_done"], "items": train_log["items"]}
+
+    stage("assemble", assemble)
+    results = {
+        name: json.loads((work / f"eval_{name}.json").read_text())["result"]
+        for name in ("base_id", "base_ood", "joint_ood", "joint_id")
+    }
+    for name, ckpt, region in (
+        ("aug_base_ood", aug, "ood"),
+        ("aug_base_id", aug, "id"),
+        ("aug_joint_ood", joint_aug, "ood"),
+        ("aug_joint_id", joint_aug, "id"),
+    ):
+
+        def cell(ckpt=ckpt, region=region, name=name):
+            return evaluate_cell(PUSHT, ckpt, region, p, here / f"eval_{name}", logs / f"eval_{name}.log")
+
+        results[name] = stage(f"eval_{name}", cell)
+    paired = paired_outcomes(
+        json.loads((work / "eval_base_id" / "episodes.json").read_text()),
+        json.loads((here / "eval_aug_base_id" / "episodes.json").read_text()),
+    )
+    collection = json.loads((here / "collect.json").read_text())["result"]
+    data = json.loads((here / "merge.json").read_text())["result"]
+    table = format_table(results)
+    lines = [
+        collection_line("episode", collection, data)
+        + f"; `aug_base` trained from scratch with the gpu base's "
+        f"recipe, seed and {train_log['steps_done']} steps on the merged data.",
+        paired_line(paired),
+    ]
+    print(table + "\n\n" + "\n".join(lines))
+    record = {
+        "task": "pusht",
+        "profile": "gpu",
+        "label": "gpu",
+        "keep": "episode",
+        "settings": p,
+        "recipe": RECIPE,
+        "aug_training": {k: train_log[k] for k in ("steps_done", "train_seconds", "gpu", "torch", "items")},
+        "date": dt.date.today().isoformat(),
+        "machine": f"eval: {platform.machine()}, {os.cpu_count()} cores, python {platform.python_version()}",
+        "collection": collection,
+        "merged": data,
+        "paired_id": paired,
+        "cells": results,
+        "paper": PAPER["pusht"],
+    }
+    (HERE / "results" / "pusht_continual_gpu.json").write_text(
+        json.dumps(record, indent=2, default=str) + "\n"
+    )
+    batch_flag = f" --eval-batch {eval_batch}" if eval_batch else ""
+    update_section(
+        "Continual learning (Push-T, gpu)",
+        f"""
+The gpu row's chain (`{work}`): its joint policy collected the episodes; `aug_base` = a base trained from
+scratch on the demos plus those episodes with exactly the gpu base's training (recipe, seed,
+{train_log["steps_done"]} steps on one {train_log["gpu"]}), so the gpu base itself is the control (the same
+training on the demos alone); `aug_joint` = the joint policy with `aug_base` (`lerobot-ocr rebase`). Paper
+(Table III): {PAPER["pusht"]}. {p["episodes"]} episodes per cell, env seeds 100000+i, evaluated on CPU.
+
+{table}
+
+{chr(10).join(lines)}
+
+Machine: {record["machine"]}. Date: {record["date"]}.
+
+Commands: `.venv/bin/python benchmarks/gpu_base.py continual-pack --workdir {work} --source {source}
+{batch_flag}`; on the GPU machine `python3 benchmarks/gpu_base.py train --steps {train_log["steps_done"]}
+--out $OUT`; here `.venv/bin/python benchmarks/gpu_base.py continual-evaluate --weights {weights}
+--workdir {work} --source {source}{batch_flag}`.
+""",
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -410,6 +554,7 @@ def main() -> None:
     a.add_argument("--workdir", type=Path, default=REPO / "outputs" / "pusht_ocr_cpu")
     b = sub.add_parser("train", help="on the GPU machine")
     b.add_argument("--seconds", type=float, default=420)
+    b.add_argument("--steps", type=int, default=None, help="exactly this many steps (default: what fits)")
     b.add_argument("--out", type=Path, default=Path(os.environ.get("OUT", "outputs/gpu_base")))
     c = sub.add_parser("evaluate", help="here: checkpoint, cells, results")
     c.add_argument("--weights", type=Path, required=True, help="the train command's output folder")
@@ -422,12 +567,33 @@ def main() -> None:
     c.add_argument("--workdir", type=Path, default=REPO / "outputs" / "pusht_ocr_gpu")
     c.add_argument("--cells", nargs="*", default=["base_id", "joint_ood", "base_ood", "joint_id"])
     c.add_argument("--eval-batch", type=int, default=None, help="envs per batch (default: the cpu profile's)")
+    for name, help_ in (
+        ("continual-pack", "here: the gpu row's joint policy collects, merge, pack the merged data"),
+        ("continual-evaluate", "here: the base retrained on the merged data, its cells, results"),
+    ):
+        d = sub.add_parser(name, help=help_)
+        if name == "continual-evaluate":
+            d.add_argument("--weights", type=Path, required=True, help="the train command's output folder")
+        else:
+            d.add_argument("--collect", type=int, default=100, help="successful episodes to collect")
+        d.add_argument("--workdir", type=Path, default=REPO / "outputs" / "pusht_ocr_gpu", help="the gpu row")
+        d.add_argument(
+            "--source",
+            type=Path,
+            default=REPO / "outputs" / "pusht_ocr_cpu",
+            help="the chain whose base_data the gpu base used",
+        )
+        d.add_argument("--eval-batch", type=int, default=None, help="envs per batch")
     args = parser.parse_args()
     if args.command == "pack":
-        pack(args.workdir)
+        pack(args.workdir / "base_data")
+    elif args.command == "continual-pack":
+        continual_pack(args.workdir, args.source, args.collect, args.eval_batch)
+    elif args.command == "continual-evaluate":
+        continual_evaluate(args.weights, args.workdir, args.source, args.eval_batch)
     elif args.command == "train":
         args.out.mkdir(parents=True, exist_ok=True)
-        train(PACK if (PACK / "items.pt").exists() else Path(".gpu"), args.seconds, args.out)
+        train(PACK if (PACK / "items.pt").exists() else Path(".gpu"), args.seconds, args.out, args.steps)
     else:
         evaluate(args.weights, args.source, args.workdir, args.cells, args.eval_batch)
 

@@ -5,19 +5,28 @@ few minutes, then evaluated here on CPU beside the `cpu` row (same data, seeds a
     python3 benchmarks/gpu_base.py train --seconds 420 --out "$OUT"    # on the GPU machine (bare torch)
     .venv/bin/python benchmarks/gpu_base.py evaluate --weights <dir>   # here: checkpoint, 4 cells, JSON
 
+and the paper's Table III on that row (after `evaluate`):
+
+    .venv/bin/python benchmarks/gpu_base.py continual-pack             # here: collect, merge, pack -> .gpu/
+    python3 benchmarks/gpu_base.py train --steps <the gpu base's> --out "$OUT"   # on the GPU machine
+    .venv/bin/python benchmarks/gpu_base.py continual-evaluate --weights <dir>   # here: 4 cells, JSON
+
 The recipe (Chi et al. 2023, low-dim Push-T) with a U-Net half as wide, (128, 256, 512), whose fp16
 weights fit what the GPU machine sends back (its (256, 512, 1024) does not); batch 256, AdamW 1e-4 (betas
 0.95, 0.999, weight decay 1e-6), cosine schedule with 500 warm-up steps, EMA weights (power 0.75, at most
 0.9999) through torch's `AveragedModel`; the model, its loss and the noise scheduler are LeRobot's
-`DiffusionPolicy`, so the checkpoint is a plain LeRobot one. The step count is what fits in `--seconds`
-(measured on the machine first), and the cosine schedule spans exactly those steps.
+`DiffusionPolicy`, so the checkpoint is a plain LeRobot one. The step count is `--steps`, or what fits in
+`--seconds` (measured on the machine first); the cosine schedule spans exactly those steps.
 
 `pack` computes every training item once with LeRobot's dataset, sampler rule (`drop_n_last_frames`) and
 preprocessor (normalisation), so the GPU machine needs only torch and LeRobot's pure-Python packages,
 which `pack` copies into `.gpu/site` (the GPU image has torch, numpy, huggingface_hub; no LeRobot).
 `evaluate` wraps the new base with the inverse policy of a finished `cpu`-profile chain (`lerobot-ocr
 rebase`) and runs the four cells of `benchmarks/pusht_ocr.py` (resumable), writing
-`benchmarks/results/pusht_gpu.json` and RESULTS.md's "Push-T (gpu)" section.
+`benchmarks/results/pusht_gpu.json` and RESULTS.md's "Push-T (gpu)" section. `continual-pack` has the
+row's joint policy collect OOD episodes (`benchmarks/continual.py`'s stage), merges them with the demos and
+packs the merged data into `.gpu/` (replacing the base's pack); `continual-evaluate` checks that the weights
+were trained exactly like the gpu base but on that pack, so the gpu base is the control.
 """
 
 from __future__ import annotations
@@ -34,6 +43,10 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
+sys.path[:0] = [
+    str(HERE),
+    str(REPO / "src"),
+]  # results_md, continual, lerobot_ocr: imported lazily, not on the GPU
 PACK = REPO / ".gpu"
 # LeRobot's import chain on the GPU image lacks these (the image has torch, numpy, huggingface_hub, …).
 PACKAGES = (
@@ -127,7 +140,7 @@ def pack(data: Path, repo_id: str = "local/pusht_base", out: Path = PACK) -> Non
     (out / "config").mkdir(parents=True)
     torch.save(batch, out / "items.pt")
     cfg.save_pretrained(out / "config")
-    (out / "source.json").write_text(json.dumps({"data": str(data), "items": len(indices)}))
+    (out / "source.json").write_text(json.dumps({"data": str(data.resolve()), "items": len(indices)}))
     site = Path(next(p for p in sys.path if p.endswith("site-packages")))
     for name in PACKAGES:
         for src in [site / name, *site.glob(f"{name}-*.dist-info")]:
@@ -181,6 +194,7 @@ def train(pack_dir: Path, seconds: float, out: Path, steps: int | None = None) -
     cfg = PreTrainedConfig.from_pretrained(pack_dir / "config")
     cfg.device = device
     data = {k: v.to(device) for k, v in torch.load(pack_dir / "items.pt").items()}
+    pack_source = json.loads((pack_dir / "source.json").read_text())
     n = len(next(iter(data.values())))
     batch_size = RECIPE["batch"]
 
@@ -251,11 +265,12 @@ def train(pack_dir: Path, seconds: float, out: Path, steps: int | None = None) -
         cfg.save_pretrained(out)
         info = {
             "recipe": RECIPE,
-            "seconds_asked": seconds,
+            "seconds_asked": None if steps_asked else seconds,
             "steps_asked": steps_asked,
             "steps_planned": steps,
             "steps_done": step,
             "items": n,
+            "data": pack_source.get("data"),
             "train_seconds": time.time() - t_train,
             "steps_per_second_probe": rate,
             "gpu": torch.cuda.get_device_name() if device == "cuda" else "cpu",
@@ -289,10 +304,24 @@ def train(pack_dir: Path, seconds: float, out: Path, steps: int | None = None) -
     print(f"done: {steps} steps in {time.time() - t_train:.0f} s", flush=True)
 
 
+def check_trained_on(train_log: dict, data: Path, cfg) -> None:
+    """Raise SystemExit unless `train_log`'s weights were trained on the items of the dataset at `data`: the
+    pack's dataset path when recorded, and always the item count (frames less `drop_n_last_frames` per
+    episode), since the checkpoint gets `data`'s statistics."""
+    info = json.loads((data / "meta" / "info.json").read_text())
+    items = info["total_frames"] - info["total_episodes"] * cfg.drop_n_last_frames
+    recorded = train_log.get("data")
+    if train_log["items"] != items or (recorded and Path(recorded).resolve() != data.resolve()):
+        raise SystemExit(
+            f"These weights were trained on {train_log['items']} items ({recorded or 'data not recorded'}), "
+            f"not on {data} ({items} items): pack that dataset and train again (a stale .gpu/ pack?)."
+        )
+
+
 def assemble_checkpoint(weights: Path, out: Path, data: Path, repo_id: str) -> None:
     """A LeRobot `DiffusionPolicy` checkpoint in `out` from the train command's folder `weights` (config and
     fp16 EMA shards, loaded back as fp32), with pre/post-processors from the statistics of the dataset at
-    `data` (the one `pack` normalised the items with)."""
+    `data`, which must be the one `pack` made the items from (else SystemExit)."""
     from lerobot.configs.policies import PreTrainedConfig
     from lerobot.datasets import LeRobotDatasetMetadata
     from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
@@ -301,6 +330,7 @@ def assemble_checkpoint(weights: Path, out: Path, data: Path, repo_id: str) -> N
 
     cfg = PreTrainedConfig.from_pretrained(weights)
     cfg.device = "cpu"
+    check_trained_on(json.loads((weights / "train_log.json").read_text()), data, cfg)
     policy = DiffusionPolicy(cfg)
     state = {}
     for shard in sorted(weights.glob("ema_fp16_*.safetensors")):
@@ -318,21 +348,18 @@ def evaluate(
 ) -> None:
     """Assemble the gpu base checkpoint (+ processors from the dataset's stats) in `work`, wrap it with
     `source`'s inverse policy, run the cells (resumable) and publish the row."""
-    sys.path[:0] = [str(HERE), str(REPO / "src")]
     from results_md import update_section
     from summary import write as write_summary
 
     from lerobot_ocr.eval_report import format_table
     from lerobot_ocr.pipeline import BIN, EVAL_SEED, PUSHT, Stages, evaluate_cell, run
 
-    p = dict(PUSHT.profiles["cpu"])
-    if eval_batch:  # episode i has seed EVAL_SEED + i whatever the batch; larger batches use the CPU better
-        p["eval_batch"] = eval_batch
+    p = _cpu_profile(eval_batch)
     stage = Stages(work)
     base = work / "base" / "checkpoints" / "last" / "pretrained_model"
     joint = work / "ocr" / "checkpoints" / "last" / "pretrained_model"
     source_joint = source / "ocr" / "checkpoints" / "last" / "pretrained_model"
-    train_log = json.loads((weights / "train_log.json").read_text())
+    train_log = _same_weights(weights, work / "train_log.json")
 
     def assemble():
         assemble_checkpoint(weights, base, source / "base_data", "local/pusht_base")
@@ -411,8 +438,19 @@ Commands: `.venv/bin/python benchmarks/gpu_base.py pack --workdir {source}`; on 
     )
 
 
+def _same_weights(weights: Path, assembled: Path) -> dict:
+    """`weights`' train log; SystemExit if a checkpoint was already assembled (`assembled`, its copy of the
+    log) from other weights, since the finished stages would otherwise be reused for them."""
+    train_log = json.loads((weights / "train_log.json").read_text())
+    if assembled.exists() and json.loads(assembled.read_text()) != train_log:
+        raise SystemExit(
+            f"{assembled.parent} holds cells of other weights than {weights}: use another --workdir, or "
+            "delete that folder's assemble.json and eval_* markers to evaluate these."
+        )
+    return train_log
+
+
 def _cpu_profile(eval_batch: int | None) -> dict:
-    sys.path[:0] = [str(HERE), str(REPO / "src")]
     from lerobot_ocr.pipeline import PUSHT
 
     p = dict(PUSHT.profiles["cpu"])
@@ -434,15 +472,33 @@ def continual_pack(work: Path, source: Path, collect_episodes: int, eval_batch: 
     stage, logs = Stages(here), here / "logs"
     joint = work / "ocr" / "checkpoints" / "last" / "pretrained_model"
     base_data = source / "base_data"
+    for path, how in ((joint, "run `evaluate` first"), (base_data, "pass the chain the gpu base used")):
+        if not path.exists():
+            raise SystemExit(f"{path} does not exist: {how}.")
+    here.mkdir(parents=True, exist_ok=True)
     stage(
         "collect",
         lambda: collect(PUSHT, p, joint, base_data, here / "collected", "episode", logs / "collect.log"),
     )
     stage("merge", lambda: merge(PUSHT, base_data, here / "collected", here / "merged", logs / "merge.log"))
-    pack(here / "merged", "local/pusht_aug")
+
+    def pack_merged():
+        pack(here / "merged", "local/pusht_aug")
+        items = json.loads((PACK / "source.json").read_text())["items"]
+        return {"items": items, "source": str(source), "collect": collect_episodes, "eval_batch": eval_batch}
+
+    packed = stage("pack", pack_merged)
+    source_json = PACK / "source.json"
+    if not source_json.exists() or json.loads(source_json.read_text())["data"] != str(
+        (here / "merged").resolve()
+    ):
+        pack_merged()  # .gpu/ was packed with other data since
+    print(
+        f"{packed['items']} items in {PACK}: train them on the GPU machine, `train --steps <the gpu base's>`"
+    )
 
 
-def continual_evaluate(weights: Path, work: Path, source: Path, eval_batch: int | None) -> None:
+def continual_evaluate(weights: Path, work: Path, eval_batch: int | None) -> None:
     """The gpu row's Table III: the base retrained from scratch on the merged data with the same recipe, steps
     and seed as the gpu base (so the gpu base is the control: same training, the demos alone), evaluated
     alone and inside the joint policy (`lerobot-ocr rebase`), ID and OOD; a paired ID check against the gpu
@@ -452,20 +508,30 @@ def continual_evaluate(weights: Path, work: Path, source: Path, eval_batch: int 
 
     from lerobot_ocr.continual.rebase import rebase
     from lerobot_ocr.eval_report import format_table, paired_outcomes
-    from lerobot_ocr.pipeline import PUSHT, Stages, evaluate_cell
+    from lerobot_ocr.pipeline import EVAL_SEED, PUSHT, Stages, evaluate_cell
 
     p = _cpu_profile(eval_batch)
     here = work / "continual_episode"
     stage, logs = Stages(here), here / "logs"
     aug = here / "base_aug" / "checkpoints" / "last" / "pretrained_model"
     joint_aug = here / "joint_aug"
-    train_log = json.loads((weights / "train_log.json").read_text())
+    needed = [work / "train_log.json", work / "eval_base_id" / "episodes.json", here / "pack.json"]
+    needed += [work / f"eval_{name}.json" for name in ("base_id", "base_ood", "joint_ood", "joint_id")]
+    if missing := [str(path) for path in needed if not path.exists()]:
+        raise SystemExit(f"Missing {missing}: run `evaluate` (all four cells) and `continual-pack` first.")
+    train_log = _same_weights(weights, here / "train_log.json")
     base_log = json.loads((work / "train_log.json").read_text())
-    if train_log["recipe"] != base_log["recipe"] or train_log["steps_done"] != base_log["steps_done"]:
+    same = (
+        train_log["recipe"] == base_log["recipe"]
+        and train_log["steps_planned"] == train_log["steps_done"] == base_log["steps_planned"]
+        and base_log["steps_done"] == base_log["steps_planned"]
+    )
+    if not same:
         raise SystemExit(
-            f"{weights} was not trained like the gpu base in {work} (recipe or steps differ: "
-            f"{train_log['steps_done']} vs {base_log['steps_done']}); the gpu base would not be its control. "
-            f"Train with `train --steps {base_log['steps_done']}`."
+            f"{weights} was not trained like the gpu base in {work} (recipe, or steps done / planned "
+            f"{train_log['steps_done']}/{train_log['steps_planned']} vs "
+            f"{base_log['steps_done']}/{base_log['steps_planned']}): the gpu base would not be its control. "
+            f"Train with `train --steps {base_log['steps_planned']}`."
         )
 
     def assemble():
@@ -496,6 +562,7 @@ def continual_evaluate(weights: Path, work: Path, source: Path, eval_batch: int 
     )
     collection = json.loads((here / "collect.json").read_text())["result"]
     data = json.loads((here / "merge.json").read_text())["result"]
+    packed = json.loads((here / "pack.json").read_text())["result"]
     table = format_table(results)
     lines = [
         collection_line("episode", collection, data)
@@ -509,7 +576,7 @@ def continual_evaluate(weights: Path, work: Path, source: Path, eval_batch: int 
         "profile": "gpu",
         "label": "gpu",
         "keep": "episode",
-        "settings": p,
+        "settings": {**p, "collect": packed["collect"]},
         "recipe": RECIPE,
         "aug_training": {k: train_log[k] for k in ("steps_done", "train_seconds", "gpu", "torch", "items")},
         "date": dt.date.today().isoformat(),
@@ -524,6 +591,8 @@ def continual_evaluate(weights: Path, work: Path, source: Path, eval_batch: int 
         json.dumps(record, indent=2, default=str) + "\n"
     )
     batch_flag = f" --eval-batch {eval_batch}" if eval_batch else ""
+    pack_flags = f"--workdir {work} --source {packed['source']} --collect {packed['collect']}"
+    pack_flags += f" --eval-batch {packed['eval_batch']}" if packed["eval_batch"] else ""
     update_section(
         "Continual learning (Push-T, gpu)",
         f"""
@@ -531,7 +600,7 @@ The gpu row's chain (`{work}`): its joint policy collected the episodes; `aug_ba
 scratch on the demos plus those episodes with exactly the gpu base's training (recipe, seed,
 {train_log["steps_done"]} steps on one {train_log["gpu"]}), so the gpu base itself is the control (the same
 training on the demos alone); `aug_joint` = the joint policy with `aug_base` (`lerobot-ocr rebase`). Paper
-(Table III): {PAPER["pusht"]}. {p["episodes"]} episodes per cell, env seeds 100000+i, evaluated on CPU.
+(Table III): {PAPER["pusht"]}. {p["episodes"]} episodes per cell, env seeds {EVAL_SEED}+i, evaluated on CPU.
 
 {table}
 
@@ -539,22 +608,26 @@ training on the demos alone); `aug_joint` = the joint policy with `aug_base` (`l
 
 Machine: {record["machine"]}. Date: {record["date"]}.
 
-Commands: `.venv/bin/python benchmarks/gpu_base.py continual-pack --workdir {work} --source {source}
-{batch_flag}`; on the GPU machine `python3 benchmarks/gpu_base.py train --steps {train_log["steps_done"]}
---out $OUT`; here `.venv/bin/python benchmarks/gpu_base.py continual-evaluate --weights {weights}
---workdir {work} --source {source}{batch_flag}`.
+Commands: `.venv/bin/python benchmarks/gpu_base.py continual-pack {pack_flags}`; on the GPU machine
+`python3 benchmarks/gpu_base.py train --steps {train_log["steps_done"]} --out $OUT`; here
+`.venv/bin/python benchmarks/gpu_base.py continual-evaluate --weights {weights} --workdir {work}{batch_flag}`.
 """,
     )
 
 
 def main() -> None:
+    from continual import PROFILES
+
+    COLLECT = PROFILES["cpu"]["collect"]
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     a = sub.add_parser("pack", help="here: items, config and LeRobot's packages -> .gpu/")
     a.add_argument("--workdir", type=Path, default=REPO / "outputs" / "pusht_ocr_cpu")
     b = sub.add_parser("train", help="on the GPU machine")
     b.add_argument("--seconds", type=float, default=420)
-    b.add_argument("--steps", type=int, default=None, help="exactly this many steps (default: what fits)")
+    b.add_argument(
+        "--steps", type=int, default=None, help="exactly this many steps; --seconds is then ignored"
+    )
     b.add_argument("--out", type=Path, default=Path(os.environ.get("OUT", "outputs/gpu_base")))
     c = sub.add_parser("evaluate", help="here: checkpoint, cells, results")
     c.add_argument("--weights", type=Path, required=True, help="the train command's output folder")
@@ -575,14 +648,14 @@ def main() -> None:
         if name == "continual-evaluate":
             d.add_argument("--weights", type=Path, required=True, help="the train command's output folder")
         else:
-            d.add_argument("--collect", type=int, default=100, help="successful episodes to collect")
+            d.add_argument("--collect", type=int, default=COLLECT, help="successful episodes to collect")
+            d.add_argument(
+                "--source",
+                type=Path,
+                default=REPO / "outputs" / "pusht_ocr_cpu",
+                help="the chain whose base_data the gpu base used",
+            )
         d.add_argument("--workdir", type=Path, default=REPO / "outputs" / "pusht_ocr_gpu", help="the gpu row")
-        d.add_argument(
-            "--source",
-            type=Path,
-            default=REPO / "outputs" / "pusht_ocr_cpu",
-            help="the chain whose base_data the gpu base used",
-        )
         d.add_argument("--eval-batch", type=int, default=None, help="envs per batch")
     args = parser.parse_args()
     if args.command == "pack":
@@ -590,7 +663,7 @@ def main() -> None:
     elif args.command == "continual-pack":
         continual_pack(args.workdir, args.source, args.collect, args.eval_batch)
     elif args.command == "continual-evaluate":
-        continual_evaluate(args.weights, args.workdir, args.source, args.eval_batch)
+        continual_evaluate(args.weights, args.workdir, args.eval_batch)
     elif args.command == "train":
         args.out.mkdir(parents=True, exist_ok=True)
         train(PACK if (PACK / "items.pt").exists() else Path(".gpu"), args.seconds, args.out, args.steps)

@@ -43,10 +43,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
-sys.path[:0] = [
-    str(HERE),
-    str(REPO / "src"),
-]  # results_md, continual, lerobot_ocr: imported lazily, not on the GPU
+# results_md, continual and lerobot_ocr, imported lazily (the GPU machine needs none of them)
+sys.path[:0] = [str(HERE), str(REPO / "src")]
 PACK = REPO / ".gpu"
 # LeRobot's import chain on the GPU image lacks these (the image has torch, numpy, huggingface_hub, …).
 PACKAGES = (

@@ -40,7 +40,7 @@ from lerobot_ocr.pipeline import (  # noqa: E402
     CELLS,
     TASKS,
     Stages,
-    evaluate_cell,
+    evaluate_cells,
     run,
     run_chain,
     save_freq,
@@ -220,15 +220,6 @@ def main() -> None:
         if name in chain.results
     }
 
-    def evaluate_cells(cells: dict[str, tuple[Path, str]]) -> None:
-        for name, (ckpt, region) in cells.items():
-            out = here / f"eval_{name}"
-
-            def evaluate(ckpt=ckpt, region=region, out=out):
-                return evaluate_cell(task, ckpt, region, p, out, logs / f"eval_{name}.log")
-
-            results[name] = stage(f"eval_{name}", evaluate)
-
     # The headline first (the augmented base), so a run cut short still has it; then the control and
     # the joint policy with the augmented base.
     ckpts, joint_aug = {}, here / "joint_aug"
@@ -243,7 +234,8 @@ def main() -> None:
 
         stage(f"ft_{name}", finetune)
         ckpts[name] = out / "checkpoints" / "last" / "pretrained_model"
-        evaluate_cells({f"{name}_base_ood": (ckpts[name], "ood"), f"{name}_base_id": (ckpts[name], "id")})
+        cells = {f"{name}_base_ood": (ckpts[name], "ood"), f"{name}_base_id": (ckpts[name], "id")}
+        results.update(evaluate_cells(stage, task, cells, p))
 
     def rebase():
         from lerobot_ocr.continual.rebase import rebase as do_rebase
@@ -251,7 +243,8 @@ def main() -> None:
         do_rebase(chain.ocr_ckpt, ckpts["aug"], joint_aug, overwrite=True)
 
     stage("rebase", rebase)
-    evaluate_cells({"aug_joint_ood": (joint_aug, "ood"), "aug_joint_id": (joint_aug, "id")})
+    cells = {"aug_joint_ood": (joint_aug, "ood"), "aug_joint_id": (joint_aug, "id")}
+    results.update(evaluate_cells(stage, task, cells, p))
     paired, base_id = None, chain.eval_dirs.get("base_id")
     if base_id is not None and (base_id / "episodes.json").exists():
         paired = paired_outcomes(

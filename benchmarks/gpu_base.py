@@ -350,7 +350,7 @@ def evaluate(
     from summary import write as write_summary
 
     from lerobot_ocr.eval_report import format_table
-    from lerobot_ocr.pipeline import BIN, EVAL_SEED, PUSHT, Stages, evaluate_cell, run
+    from lerobot_ocr.pipeline import BIN, EVAL_SEED, PUSHT, Stages, evaluate_cells, run
 
     p = _cpu_profile(eval_batch)
     stage = Stages(work)
@@ -376,15 +376,10 @@ def evaluate(
         return {"steps": train_log["steps_done"], "inverse_policy_from": str(source_joint)}
 
     stage("assemble", assemble)
-    results = {}
-    for name in cells:
-        ckpt, region = (base if name.startswith("base") else joint), name.split("_")[1]
-        out = work / f"eval_{name}"
-
-        def cell(ckpt=ckpt, region=region, out=out, name=name):
-            return evaluate_cell(PUSHT, ckpt, region, p, out, work / "logs" / f"eval_{name}.log")
-
-        results[name] = stage(f"eval_{name}", cell)
+    policies = {"base": base, "joint": joint}
+    results = evaluate_cells(
+        stage, PUSHT, {n: (policies[n.split("_")[0]], n.split("_")[1]) for n in cells}, p
+    )
     table = format_table(results)
     print("\n" + table)
     if set(results) != {"base_id", "base_ood", "joint_id", "joint_ood"}:
@@ -457,14 +452,15 @@ def _cpu_profile(eval_batch: int | None) -> dict:
     return p
 
 
-def continual_pack(work: Path, source: Path, collect_episodes: int, eval_batch: int | None) -> None:
+def continual_pack(work: Path, source: Path, collect_episodes: int | None, eval_batch: int | None) -> None:
     """The gpu row's continual-learning data: its joint policy (in `work`) collects `collect_episodes`
     successful OOD episodes (`benchmarks/continual.py`'s collect stage), merged with `source`'s base data,
     packed into `.gpu/` for `train`. Stages resume, in `work/continual_episode/`."""
-    from continual import collect, merge
+    from continual import PROFILES, collect, merge
 
     from lerobot_ocr.pipeline import PUSHT, Stages
 
+    collect_episodes = collect_episodes or PROFILES["cpu"]["collect"]
     p = {**_cpu_profile(eval_batch), "collect": collect_episodes}
     here = work / "continual_episode"
     stage, logs = Stages(here), here / "logs"
@@ -506,11 +502,11 @@ def continual_evaluate(weights: Path, work: Path, eval_batch: int | None) -> Non
 
     from lerobot_ocr.continual.rebase import rebase
     from lerobot_ocr.eval_report import format_table, paired_outcomes
-    from lerobot_ocr.pipeline import EVAL_SEED, PUSHT, Stages, evaluate_cell
+    from lerobot_ocr.pipeline import EVAL_SEED, PUSHT, Stages, evaluate_cells
 
     p = _cpu_profile(eval_batch)
     here = work / "continual_episode"
-    stage, logs = Stages(here), here / "logs"
+    stage = Stages(here)
     aug = here / "base_aug" / "checkpoints" / "last" / "pretrained_model"
     joint_aug = here / "joint_aug"
     needed = [work / "train_log.json", work / "eval_base_id" / "episodes.json", here / "pack.json"]
@@ -543,17 +539,13 @@ def continual_evaluate(weights: Path, work: Path, eval_batch: int | None) -> Non
         name: json.loads((work / f"eval_{name}.json").read_text())["result"]
         for name in ("base_id", "base_ood", "joint_ood", "joint_id")
     }
-    for name, ckpt, region in (
-        ("aug_base_ood", aug, "ood"),
-        ("aug_base_id", aug, "id"),
-        ("aug_joint_ood", joint_aug, "ood"),
-        ("aug_joint_id", joint_aug, "id"),
-    ):
-
-        def cell(ckpt=ckpt, region=region, name=name):
-            return evaluate_cell(PUSHT, ckpt, region, p, here / f"eval_{name}", logs / f"eval_{name}.log")
-
-        results[name] = stage(f"eval_{name}", cell)
+    cells = {
+        "aug_base_ood": (aug, "ood"),
+        "aug_base_id": (aug, "id"),
+        "aug_joint_ood": (joint_aug, "ood"),
+        "aug_joint_id": (joint_aug, "id"),
+    }
+    results.update(evaluate_cells(stage, PUSHT, cells, p))
     paired = paired_outcomes(
         json.loads((work / "eval_base_id" / "episodes.json").read_text()),
         json.loads((here / "eval_aug_base_id" / "episodes.json").read_text()),
@@ -614,9 +606,6 @@ Commands: `.venv/bin/python benchmarks/gpu_base.py continual-pack {pack_flags}`;
 
 
 def main() -> None:
-    from continual import PROFILES
-
-    COLLECT = PROFILES["cpu"]["collect"]
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     a = sub.add_parser("pack", help="here: items, config and LeRobot's packages -> .gpu/")
@@ -628,33 +617,30 @@ def main() -> None:
     )
     b.add_argument("--out", type=Path, default=Path(os.environ.get("OUT", "outputs/gpu_base")))
     c = sub.add_parser("evaluate", help="here: checkpoint, cells, results")
-    c.add_argument("--weights", type=Path, required=True, help="the train command's output folder")
-    c.add_argument(
-        "--source",
-        type=Path,
-        default=REPO / "outputs" / "pusht_ocr_cpu",
-        help="a finished chain: its base_data and inverse policy",
+    d = sub.add_parser("continual-pack", help="here: the gpu row's joint policy collects; merge; pack")
+    e = sub.add_parser(
+        "continual-evaluate", help="here: the base retrained on the merged data, cells, results"
     )
-    c.add_argument("--workdir", type=Path, default=REPO / "outputs" / "pusht_ocr_gpu")
-    c.add_argument("--cells", nargs="*", default=["base_id", "joint_ood", "base_ood", "joint_id"])
-    c.add_argument("--eval-batch", type=int, default=None, help="envs per batch (default: the cpu profile's)")
-    for name, help_ in (
-        ("continual-pack", "here: the gpu row's joint policy collects, merge, pack the merged data"),
-        ("continual-evaluate", "here: the base retrained on the merged data, its cells, results"),
+    for sub_parser in (c, e):
+        sub_parser.add_argument(
+            "--weights", type=Path, required=True, help="the train command's output folder"
+        )
+    for sub_parser, help_ in (
+        (c, "a finished chain: its base_data and inverse policy"),
+        (d, "the gpu base's chain"),
     ):
-        d = sub.add_parser(name, help=help_)
-        if name == "continual-evaluate":
-            d.add_argument("--weights", type=Path, required=True, help="the train command's output folder")
-        else:
-            d.add_argument("--collect", type=int, default=COLLECT, help="successful episodes to collect")
-            d.add_argument(
-                "--source",
-                type=Path,
-                default=REPO / "outputs" / "pusht_ocr_cpu",
-                help="the chain whose base_data the gpu base used",
-            )
-        d.add_argument("--workdir", type=Path, default=REPO / "outputs" / "pusht_ocr_gpu", help="the gpu row")
-        d.add_argument("--eval-batch", type=int, default=None, help="envs per batch")
+        sub_parser.add_argument("--source", type=Path, default=REPO / "outputs" / "pusht_ocr_cpu", help=help_)
+    for sub_parser in (c, d, e):
+        sub_parser.add_argument(
+            "--workdir", type=Path, default=REPO / "outputs" / "pusht_ocr_gpu", help="the gpu row"
+        )
+        sub_parser.add_argument(
+            "--eval-batch", type=int, default=None, help="envs per batch (default: the cpu profile's)"
+        )
+    c.add_argument("--cells", nargs="*", default=["base_id", "joint_ood", "base_ood", "joint_id"])
+    d.add_argument(
+        "--collect", type=int, default=None, help="successful episodes (default: continual.py's cpu)"
+    )
     args = parser.parse_args()
     if args.command == "pack":
         pack(args.workdir / "base_data")

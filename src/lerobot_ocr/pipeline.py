@@ -250,13 +250,29 @@ def evaluate_cell(
     return summarize(*read)
 
 
+def evaluate_cells(
+    stage: Stages, task: Task, cells: dict[str, tuple[Path, str]], p: dict, env_args: list[str] = ()
+) -> dict[str, dict]:
+    """Each cell `name: (policy, region)` as the resumable stage `eval_<name>` of `stage`, run
+    (`evaluate_cell`) into `<stage.work>/eval_<name>` with its log in `<stage.work>/logs/`; returns each
+    cell's summary by name."""
+    results = {}
+    for name, (policy, region) in cells.items():
+
+        def evaluate(policy=policy, region=region, name=name):
+            out, log = stage.work / f"eval_{name}", stage.work / "logs" / f"eval_{name}.log"
+            return evaluate_cell(task, policy, region, p, out, log, env_args)
+
+        results[name] = stage(f"eval_{name}", evaluate)
+    return results
+
+
 def run_chain(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> Chain:
     """Run (or resume) the chain for profile settings `p` in `work`; evaluate `p["cells"]` (default all).
 
     Raises:
         RuntimeError: a stage failed (its log's tail is in the message; a re-run resumes at that stage).
     """
-
     work.mkdir(parents=True, exist_ok=True)
     logs, stage = work / "logs", Stages(work)
     demos, base_data, converted = work / "demos", work / "base_data", work / "converted"
@@ -335,15 +351,13 @@ def run_chain(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> Chai
     ocr_ckpt = ocr_out / "checkpoints" / "last" / "pretrained_model"
 
     policies = {"base": base_ckpt, "joint": ocr_ckpt}
-    results, eval_dirs = {}, {}
-    for name in (c for c in CELLS if c in p.get("cells", CELLS)):
-        ckpt, region = policies[name.split("_")[0]], name.split("_")[1]
-        out = eval_dirs[name] = work / f"eval_{name}"
-
-        def evaluate(ckpt=ckpt, region=region, out=out, name=name):
-            return evaluate_cell(task, ckpt, region, p, out, logs / f"eval_{name}.log", env_args)
-
-        results[name] = stage(f"eval_{name}", evaluate)
+    cells = {
+        name: (policies[name.split("_")[0]], name.split("_")[1])
+        for name in CELLS
+        if name in p.get("cells", CELLS)
+    }
+    results = evaluate_cells(stage, task, cells, p, env_args)
+    eval_dirs = {name: work / f"eval_{name}" for name in cells}
     return Chain(results, eval_dirs, base_ckpt, ocr_ckpt, converted, stage.times)
 
 

@@ -235,10 +235,8 @@ def _robot_episode(ctx: dict, seed: int, keep: str, features: dict, max_steps: i
                 break
     steps = len(actions)
     obs = {}
-    for (
-        key,
-        values,
-    ) in observed.items():  # as lerobot_eval.rollout gives them: (1, T, ...), images CHW in [0, 1]
+    # as lerobot_eval.rollout gives them: (1, T, ...), images CHW in [0, 1]
+    for key, values in observed.items():
         values = torch.as_tensor(np.stack(values))
         if features[key]["dtype"] in ("image", "video"):
             values = values.permute(0, 3, 1, 2).float() / 255

@@ -582,7 +582,7 @@ SQUARE = Task(
             "ocr_steps": 30000,
             "ocr_batch": 64,
             "ocr_dims": "[64,128,256]",
-            "episodes": 50,
+            "episodes": 100,  # issue 21: the Square row decides with >= 100 episodes per cell
             "eval_batch": 10,
             "device": "cpu",
         },

@@ -124,6 +124,28 @@ def test_both_budgets_from_one_long_run():
     assert summarize(info, None, episodes)["success_rate"] == 0.75  # no budget given: the episode's
 
 
+def test_start_split_counts_both_budgets():
+    """The split by where episodes started reports strict and reference-budget successes per group."""
+    info = {
+        "per_task": [{"metrics": {"successes": [True, True, True, False]}}],
+        "overall": {"avg_max_reward": 0.9, "eval_s": 1.0},
+    }
+    episodes = {
+        "success_step": [300, 500, 700, -1],
+        "decisions_at_success": [40, 55, 70, -1],
+        "step_budget": 400,
+        "decision_budget": 60,
+    }
+    ocr = {"mean_recovery_fraction": 0.3, "started_ood": [True, True, False, False]}
+    row = summarize(info, ocr, episodes)
+    assert row["started_ood"] == {"episodes": 2, "successes": 1, "successes_reference_budget": 2}
+    assert row["started_id"] == {"episodes": 2, "successes": 0, "successes_reference_budget": 0}
+    assert format_start_split({"joint_ood": row}) == (
+        "joint_ood: 2 started out of distribution (recovery first): 1 succeeded (0.50), 2 within the "
+        "reference budget; 2 started on the base: 0 succeeded (0.00), 0 within the reference budget"
+    )
+
+
 def test_paired_outcomes_count_per_episode_within_the_budget():
     from lerobot_ocr.eval_report import paired_outcomes
 

@@ -103,6 +103,7 @@ def summarize(eval_info: dict, ocr: dict | None, episodes: dict | None = None) -
     """
     successes = [bool(s) for task in eval_info["per_task"] for s in task["metrics"]["successes"]]
     n, k = len(successes), sum(successes)
+    reference = None  # per episode, success within the decision budget (when one is given)
     lo, hi = wilson_interval(k, n)
     out = {
         "success_rate": k / n if n else float("nan"),
@@ -122,6 +123,8 @@ def summarize(eval_info: dict, ocr: dict | None, episodes: dict | None = None) -
             # everything below (the start split) counts the same successes as the headline
             successes = [0 < step <= budgets["strict"]["budget"] for step in episodes["success_step"][:n]]
         if "reference_budget" in budgets:
+            cap = budgets["reference_budget"]["budget"]
+            reference = [0 < d <= cap for d in episodes["decisions_at_success"][:n]]
             out["success_rate_reference_budget"] = budgets["reference_budget"]["successes"] / n
             out["ci95_reference_budget"] = budgets["reference_budget"]["ci95"]
             out["decision_budget"] = budgets["reference_budget"]["budget"]
@@ -132,6 +135,10 @@ def summarize(eval_info: dict, ocr: dict | None, episodes: dict | None = None) -
             for name, flag in (("started_ood", True), ("started_id", False)):
                 picked = [s for s, f in zip(successes, started) if bool(f) == flag]
                 out[name] = {"episodes": len(picked), "successes": sum(picked)}
+                if reference is not None:
+                    out[name]["successes_reference_budget"] = sum(
+                        r for r, f in zip(reference, started) if bool(f) == flag
+                    )
             first, ended = ocr.get("first_base_step"), ocr.get("ended_in_recovery")
             if first is not None and ended is not None:  # how episodes that began with a recovery ended
                 flagged = [(s, f, e) for s, o, f, e in zip(successes, started, first, ended) if o]
@@ -157,7 +164,10 @@ def format_start_split(rows: dict[str, dict]) -> str:
             ("started_id", "started on the base"),
         ):
             k, n = r[key]["successes"], r[key]["episodes"]
-            parts.append(f"{n} {what}: {k} succeeded" + (f" ({k / n:.2f})" if n else ""))
+            part = f"{n} {what}: {k} succeeded" + (f" ({k / n:.2f})" if n else "")
+            if "successes_reference_budget" in r[key]:
+                part += f", {r[key]['successes_reference_budget']} within the reference budget"
+            parts.append(part)
         line = f"{name}: " + "; ".join(parts)
         flagged = r["started_ood"]
         if "failed_on_base" in flagged:

@@ -120,6 +120,9 @@ def test_record_convert_train_select_action_rollout(tmp_path, monkeypatch):
             "--policy.diffusion_step_embed_dim=16",
             "--policy.horizon=8",
             "--policy.n_action_steps=4",
+            # horizon - n_action_steps - n_obs_steps + 1 (LeRobot's fixed default, 7, needs 8 frames; a loaded
+            # machine records fewer than 3 s x 10 fps, and >= 4 frames is what the recording guarantees)
+            "--policy.drop_n_last_frames=3",
             "--policy.num_inference_steps=2",
             "--policy.crop_shape=null",
             "--policy.pretrained_backbone_weights=null",

@@ -1,7 +1,7 @@
 """Push-T result pipeline: demos -> base diffusion policy -> convert -> ocr_joint -> lerobot-eval (4 cells).
 
     .venv/bin/python benchmarks/pusht_ocr.py --profile quick   # <= 15 min on a 2-core CPU: shows the effect
-    .venv/bin/python benchmarks/pusht_ocr.py --profile cpu     # ≈ 2.2 h on 2 cores: the row (200 episodes)
+    .venv/bin/python benchmarks/pusht_ocr.py --profile cpu     # ≈ 3 h on 2 cores: the row (200 episodes)
     .venv/bin/python benchmarks/pusht_ocr.py --profile paper   # the paper's image base; meant for a GPU
 
 The profiles and the chain: `lerobot_ocr.pipeline.PUSHT`; publishing: `ocr_pipeline.py` (results in

@@ -350,7 +350,7 @@ def evaluate(
     from summary import write as write_summary
 
     from lerobot_ocr.eval_report import format_table
-    from lerobot_ocr.pipeline import BIN, EVAL_SEED, PUSHT, Stages, evaluate_cells, run
+    from lerobot_ocr.pipeline import BIN, EVAL_SEED, PUSHT, Stages, chain_cells, evaluate_cells, run
 
     p = _cpu_profile(eval_batch)
     stage = Stages(work)
@@ -376,10 +376,7 @@ def evaluate(
         return {"steps": train_log["steps_done"], "inverse_policy_from": str(source_joint)}
 
     stage("assemble", assemble)
-    policies = {"base": base, "joint": joint}
-    results = evaluate_cells(
-        stage, PUSHT, {n: (policies[n.split("_")[0]], n.split("_")[1]) for n in cells}, p
-    )
+    results = evaluate_cells(stage, PUSHT, chain_cells(base, joint, cells), p)
     table = format_table(results)
     print("\n" + table)
     if set(results) != {"base_id", "base_ood", "joint_id", "joint_ood"}:

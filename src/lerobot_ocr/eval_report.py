@@ -60,7 +60,8 @@ def decisions_at(steps: list[int], decisions=None, action_steps: int | None = No
 
 def budget_success(episodes: dict, n: int) -> dict:
     """Success under the step budget (strict) and the decision budget (the reference's) of the first `n`
-    episodes of `episodes` = {"success_step", "decisions_at_success", "step_budget", "decision_budget"}."""
+    episodes of `episodes` = {"success_step", "decisions_at_success", "step_budget", "decision_budget"}:
+    per budget given, its successes, 95% interval and per-episode `solved` flags."""
     steps, decisions = episodes["success_step"][:n], episodes["decisions_at_success"][:n]
     out = {}
     for key, values, budget in (
@@ -68,8 +69,14 @@ def budget_success(episodes: dict, n: int) -> dict:
         ("reference_budget", decisions, episodes.get("decision_budget")),
     ):
         if budget is not None:
-            k = sum(1 for v in values if 0 < v <= budget)
-            out[key] = {"successes": k, "budget": budget, "ci95": list(wilson_interval(k, n))}
+            solved = [0 < v <= budget for v in values]
+            k = sum(solved)
+            out[key] = {
+                "successes": k,
+                "budget": budget,
+                "ci95": list(wilson_interval(k, n)),
+                "solved": solved,
+            }
     return out
 
 
@@ -121,10 +128,9 @@ def summarize(eval_info: dict, ocr: dict | None, episodes: dict | None = None) -
             out["ci95"] = budgets["strict"]["ci95"]
             out["step_budget"] = budgets["strict"]["budget"]
             # everything below (the start split) counts the same successes as the headline
-            successes = [0 < step <= budgets["strict"]["budget"] for step in episodes["success_step"][:n]]
+            successes = budgets["strict"]["solved"]
         if "reference_budget" in budgets:
-            cap = budgets["reference_budget"]["budget"]
-            reference = [0 < d <= cap for d in episodes["decisions_at_success"][:n]]
+            reference = budgets["reference_budget"]["solved"]
             out["success_rate_reference_budget"] = budgets["reference_budget"]["successes"] / n
             out["ci95_reference_budget"] = budgets["reference_budget"]["ci95"]
             out["decision_budget"] = budgets["reference_budget"]["budget"]

@@ -250,6 +250,12 @@ def evaluate_cell(
     return summarize(*read)
 
 
+def chain_cells(base: Path, joint: Path, names) -> dict[str, tuple[Path, str]]:
+    """Cell names `<base|joint>_<id|ood>` -> `evaluate_cells`' `name: (policy, region)`."""
+    policies = {"base": base, "joint": joint}
+    return {name: (policies[name.split("_")[0]], name.split("_")[1]) for name in names}
+
+
 def evaluate_cells(
     stage: Stages, task: Task, cells: dict[str, tuple[Path, str]], p: dict, env_args: list[str] = ()
 ) -> dict[str, dict]:
@@ -350,12 +356,7 @@ def run_chain(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> Chai
     stage("ocr_train", train_ocr)
     ocr_ckpt = ocr_out / "checkpoints" / "last" / "pretrained_model"
 
-    policies = {"base": base_ckpt, "joint": ocr_ckpt}
-    cells = {
-        name: (policies[name.split("_")[0]], name.split("_")[1])
-        for name in CELLS
-        if name in p.get("cells", CELLS)
-    }
+    cells = chain_cells(base_ckpt, ocr_ckpt, (name for name in CELLS if name in p.get("cells", CELLS)))
     results = evaluate_cells(stage, task, cells, p, env_args)
     eval_dirs = {name: work / f"eval_{name}" for name in cells}
     return Chain(results, eval_dirs, base_ckpt, ocr_ckpt, converted, stage.times)

@@ -51,7 +51,7 @@ from lerobot_ocr.pipeline import (  # noqa: E402
 # Our stages' settings per profile (the chain's come from the task's profile of the same name).
 PROFILES = {
     "quick": {"collect": 10, "ft_steps": 1000},
-    "cpu": {"collect": 100, "ft_steps": 20000},
+    "cpu": {"collect": 100, "ft_steps": 5000},
 }
 PAPER = {  # Table III: base ID / OOD, then the augmented base's
     "pusht": "base 0.90 / 0.10 → augmented base 0.97 / 0.80",

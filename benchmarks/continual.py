@@ -34,6 +34,7 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path[:0] = [str(HERE), str(REPO / "src")]
 from results_md import update_section  # noqa: E402
+from summary import write as write_summary  # noqa: E402
 
 from lerobot_ocr.pipeline import (  # noqa: E402
     BIN,
@@ -285,6 +286,7 @@ def main() -> None:
         "steps; `aug_base` = fine-tuned on the base's data plus the collected episodes; `aug_joint` = the "
         "joint policy with `aug_base` (`lerobot-ocr rebase`).\n\n" + table + "\n\n" + "\n".join(lines),
     )
+    write_summary()  # the summary's Table III rows
 
 
 if __name__ == "__main__":

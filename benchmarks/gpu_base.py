@@ -600,6 +600,9 @@ Commands: `.venv/bin/python benchmarks/gpu_base.py continual-pack {pack_flags}`;
 `.venv/bin/python benchmarks/gpu_base.py continual-evaluate --weights {weights} --workdir {work}{batch_flag}`.
 """,
     )
+    from summary import write as write_summary
+
+    write_summary()  # the summary's Table III rows
 
 
 def main() -> None:

@@ -48,3 +48,31 @@ def test_a_probe_is_adoptable_only_outside_its_baselines_interval():
     row = "| ood | 0.75 | [0.69, 0.80] | 0.8 [0.74, 0.85] | 200 | plain: 0.64 | outside |"
     assert "| d11 | `c` | `--policy.fixed_delay=11` " + row in text
     assert "| plain | `c` | none | ood | 0.64 | [0.57, 0.70] | — | 200 | — | — |" in text
+
+
+def test_the_continual_summary_sits_beside_table_iii(tmp_path):
+    import json
+
+    def record(label, keep, cells):
+        return {"label": label, "keep": keep, "date": "2026-12-01", "cells": cells}
+
+    full = {c: cell(0.5, 200) for c in ("base_id", "base_ood", "aug_base_id")}
+    full["aug_base_ood"] = cell(0.64, 200) | {"success_rate_episode": 0.88}
+    full["aug_joint_ood"] = cell(0.7, 200) | {"success_rate_reference_budget": 0.84}
+    no_joint = {c: cell(0.5, 100) for c in ("base_id", "base_ood", "aug_base_id", "aug_base_ood")}
+    files = {
+        "pusht_continual_mid20k_recovery": record("mid20k", "recovery", full),
+        "pusht_continual_gpu": record("gpu", "episode", no_joint),
+        "pusht_continual_cpu": record("cpu", "episode", full),
+    }
+    for name, r in files.items():
+        (tmp_path / f"{name}.json").write_text(json.dumps(r))
+    rows = summary.continual_table(tmp_path).splitlines()[2:]
+    assert [r.split(" | ")[1] for r in rows] == [  # the benchmark rows first, then the others by name
+        "`cpu` (2026-12-01)",
+        "`gpu` (2026-12-01)",
+        "`mid20k`, `--keep=recovery` (2026-12-01)",
+    ]
+    paper = "0.90 / 0.10 → 0.97 / 0.80"
+    assert f"| 0.64 [0.57, 0.70] | 0.88 [0.83, 0.92] | 0.84 [0.78, 0.88] | 200 | {paper} |" in rows[0]
+    assert "| 0.50 [0.40, 0.60] | — | — | 100 |" in rows[1]  # budgets a run did not record

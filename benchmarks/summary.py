@@ -140,8 +140,9 @@ def body() -> str:
         "Policy's recipe on one GPU (`gpu`, evaluated on CPU, `benchmarks/gpu_base.py`).\n\n"
         + table()
         + "\n\nContinual learning (the paper's Table III, `benchmarks/continual.py`): the base fine-tuned "
-        "5,000 steps (`gpu`: retrained from scratch) on the demos plus 100 episodes the joint policy collected "
-        "from OOD starts; `mid20k` = a 20k-step CPU base; strict cells unless marked.\n\n" + continual_table()
+        "5,000 steps (`gpu`: retrained from scratch) on the demos plus 100 episodes the joint policy "
+        "collected from OOD starts; `mid20k` = a 20k-step CPU base; strict cells unless marked.\n\n"
+        + continual_table()
     )
 
 

@@ -16,9 +16,11 @@ resume like the chain's:
 4. rebase: the joint policy with the augmented base;
 5. the cells (same eval seeds 100000+i as the chain's), each model's right after it is made: the
    augmented base, the control and the joint policy with the augmented base, from ID and OOD starts.
-Writes `benchmarks/results/<task>_continual_<profile>.json` (every cell, the collection line, the paired
-ID check: episodes both / only the base / only the augmented base solved) and the RESULTS.md section
-"Continual learning (<task>, <profile>)". `--set key=value` overrides profile values (chain's and ours).
+Writes `benchmarks/results/<task>_continual_<label>[_<keep>].json` (label: `--label`, default the profile;
+every cell, the collection line, the paired ID check: episodes both / only the base / only the augmented base
+solved), the RESULTS.md section "Continual learning (<task>, <label>[, <keep>])" and the summary's Table III
+rows (`summary.py`; a `quick` run is a smoke run, left out). `--set key=value` overrides profile values
+(chain's and ours).
 """
 
 from __future__ import annotations
@@ -52,7 +54,7 @@ from lerobot_ocr.pipeline import (  # noqa: E402
 # Our stages' settings per profile (the chain's come from the task's profile of the same name).
 PROFILES = {
     "quick": {"collect": 10, "ft_steps": 1000},
-    "cpu": {"collect": 100, "ft_steps": 5000},
+    "cpu": {"collect": 100, "ft_steps": 5000},  # as the 20k-base table; 20000 would cost 2 × ≈ 50 min
 }
 PAPER = {  # Table III: base ID / OOD, then the augmented base's
     "pusht": "base 0.90 / 0.10 → augmented base 0.97 / 0.80",

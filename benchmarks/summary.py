@@ -104,23 +104,25 @@ def cell(result: dict, name: str, budget: str = "") -> str:
 
 
 def continual_table(results_dir: Path = HERE / "results") -> str:
-    """The paper's Table III beside each `<task>_continual_<label>.json` (`benchmarks/continual.py`)."""
+    """The paper's Table III beside each `<task>_continual_*.json` (`benchmarks/continual.py`): the benchmark
+    rows (`PROFILES` order) first, then the others by label; `quick` smoke runs left out."""
     lines = [
         "| task | row | base ID | base OOD | augmented base ID | augmented base OOD | augmented base OOD, "
         "whole episode | joint OOD on it, reference budget | episodes per cell | paper: base ID / OOD → "
         "augmented base ID / OOD |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
+    order = {p: i for i, p in enumerate(PROFILES)}
     for prefix, (title, _) in TASKS.items():
-        paths = list(results_dir.glob(f"{prefix}_continual_*.json"))
-        order = {p: i for i, p in enumerate(PROFILES)}
-        for path in sorted(paths, key=lambda p: (order.get(p.stem.split("_", 2)[2], len(order)), p.stem)):
-            r = json.loads(path.read_text())
+        records = [json.loads(p.read_text()) for p in results_dir.glob(f"{prefix}_continual_*.json")]
+        records = [r for r in records if r.get("cells") and r.get("profile") != "quick"]
+        records.sort(key=lambda r: (order.get(r["label"], len(order)), r["label"], r["keep"] != "episode"))
+        paper = CONTINUAL_PAPER[prefix]
+        for r in records:
             keep = "" if r["keep"] == "episode" else f", `--keep={r['keep']}`"
             shown = [cell(r, n) for n in ("base_id", "base_ood", "aug_base_id", "aug_base_ood")]
             shown += [cell(r, "aug_base_ood", "_episode"), cell(r, "aug_joint_ood", "_reference_budget")]
             n = "/".join(sorted({str(c["n_episodes"]) for c in r["cells"].values()}, key=int))
-            paper = CONTINUAL_PAPER[prefix]
             lines.append(
                 f"| {title} | `{r['label']}`{keep} ({r['date']}) | {' | '.join(shown)} | {n} | "
                 f"{paper[0]:.2f} / {paper[1]:.2f} → {paper[2]:.2f} / {paper[3]:.2f} |"
@@ -140,9 +142,9 @@ def body() -> str:
         "Policy's recipe on one GPU (`gpu`, evaluated on CPU, `benchmarks/gpu_base.py`).\n\n"
         + table()
         + "\n\nContinual learning (the paper's Table III, `benchmarks/continual.py`): the base fine-tuned "
-        "5,000 steps (`gpu`: retrained from scratch) on the demos plus 100 episodes the joint policy "
-        "collected from OOD starts; `mid20k` = a 20k-step CPU base; strict cells unless marked.\n\n"
-        + continual_table()
+        "(`gpu`: retrained from scratch) on the demos plus the episodes the joint policy collected from OOD "
+        "starts (steps and counts: each row's section below); `mid20k` = a 20k-step CPU base; strict cells "
+        "unless marked.\n\n" + continual_table()
     )
 
 

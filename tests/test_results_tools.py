@@ -53,8 +53,8 @@ def test_a_probe_is_adoptable_only_outside_its_baselines_interval():
 def test_the_continual_summary_sits_beside_table_iii(tmp_path):
     import json
 
-    def record(label, keep, cells):
-        return {"label": label, "keep": keep, "date": "2026-12-01", "cells": cells}
+    def record(label, keep, cells, profile="cpu"):
+        return {"label": label, "keep": keep, "date": "2026-12-01", "cells": cells, "profile": profile}
 
     full = {c: cell(0.5, 200) for c in ("base_id", "base_ood", "aug_base_id")}
     full["aug_base_ood"] = cell(0.64, 200) | {"success_rate_episode": 0.88}
@@ -64,6 +64,13 @@ def test_the_continual_summary_sits_beside_table_iii(tmp_path):
         "pusht_continual_mid20k_recovery": record("mid20k", "recovery", full),
         "pusht_continual_gpu": record("gpu", "episode", no_joint),
         "pusht_continual_cpu": record("cpu", "episode", full),
+        "pusht_continual_a20k": record("a20k", "episode", full),  # alphabetically before cpu: after gpu
+        "pusht_continual_quick": record("quick", "episode", full, profile="quick"),  # a smoke run: left out
+        "pusht_continual_old": {
+            "label": "old",
+            "keep": "episode",
+            "date": "2026-11-01",
+        },  # no cells: left out
     }
     for name, r in files.items():
         (tmp_path / f"{name}.json").write_text(json.dumps(r))
@@ -71,6 +78,7 @@ def test_the_continual_summary_sits_beside_table_iii(tmp_path):
     assert [r.split(" | ")[1] for r in rows] == [  # the benchmark rows first, then the others by name
         "`cpu` (2026-12-01)",
         "`gpu` (2026-12-01)",
+        "`a20k` (2026-12-01)",
         "`mid20k`, `--keep=recovery` (2026-12-01)",
     ]
     paper = "0.90 / 0.10 → 0.97 / 0.80"

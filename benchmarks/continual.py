@@ -36,6 +36,7 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path[:0] = [str(HERE), str(REPO / "src")]
 from results_md import update_section  # noqa: E402
+from summary import CONTINUAL_PAPER  # noqa: E402
 from summary import write as write_summary  # noqa: E402
 
 from lerobot_ocr.pipeline import (  # noqa: E402
@@ -56,9 +57,9 @@ PROFILES = {
     "quick": {"collect": 10, "ft_steps": 1000},
     "cpu": {"collect": 100, "ft_steps": 5000},  # as the 20k-base table; 20000 would cost 2 × ≈ 50 min
 }
-PAPER = {  # Table III: base ID / OOD, then the augmented base's
-    "pusht": "base 0.90 / 0.10 → augmented base 0.97 / 0.80",
-    "square": "base 0.87 / 0.00 → augmented base 0.87 / 0.76",
+PAPER = {  # Table III (numbers in summary.CONTINUAL_PAPER): base ID / OOD, then the augmented base's
+    task: "base {:.2f} / {:.2f} → augmented base {:.2f} / {:.2f}".format(*rates)
+    for task, rates in CONTINUAL_PAPER.items()
 }
 COLLECT_SEED = 300_000
 

@@ -451,7 +451,10 @@ class OcrJointPolicy(PreTrainedPolicy):
             self._new_chunks = None
             return self._unchecked
         score = obs.recovery.score.to(device)
-        decision = decide(score, float(self.manifold.threshold_), self._switch)
+        deep = None
+        if self.config.handback_agreement is not None:
+            deep = obs.recovery.agreement.to(device) <= self.config.handback_agreement
+        decision = decide(score, float(self.manifold.threshold_), self._switch, deep)
         if bool(decision.needs_chunk.any()):
             self._plan_chunks(obs, decision.needs_chunk, noise)
         if bool(decision.hand_back.any()):

@@ -54,9 +54,6 @@ class RecoveryOutput:
     log_density: (B, K) per-keypoint log density.
     score: (B,) OOD score (see `KeypointManifold.score_type`); higher = more in distribution.
     is_ood: (B,) bool, score < threshold_ (all False if the manifold is not calibrated).
-    agreement: (B,) norm of the mean of the per-keypoint unit gradients, in [0, 1]: 1 when every
-        keypoint's density rises the same way (far from the data), small deep inside it (the
-        reference's Push-T OOD test, ||mean r_i|| > 80 with r_i = 148.4 u_i, is agreement > 0.54).
     """
 
     vector: torch.Tensor
@@ -64,7 +61,6 @@ class RecoveryOutput:
     log_density: torch.Tensor
     score: torch.Tensor
     is_ood: torch.Tensor
-    agreement: torch.Tensor
 
     def rows(self, index: torch.Tensor) -> RecoveryOutput:
         """The same output for the rows `index` (a (B,) bool mask or (R,) indices) only."""
@@ -404,8 +400,7 @@ class KeypointManifold(nn.Module):
             per_kp = mag.unsqueeze(-1) * unit
             weak = is_ood & (torch.linalg.vector_norm(per_kp.mean(-2), dim=-1) < 1e-9)
             per_kp = torch.where(weak[..., None, None], paper, per_kp)
-        agreement = torch.linalg.vector_norm(unit.mean(-2), dim=-1)
-        return RecoveryOutput(per_kp.mean(-2), per_kp, log_p, score, is_ood, agreement)
+        return RecoveryOutput(per_kp.mean(-2), per_kp, log_p, score, is_ood)
 
     # ------------------------------------------------------------------------------- save/load
     def hyperparameters(self) -> dict:

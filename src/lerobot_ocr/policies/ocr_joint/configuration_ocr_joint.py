@@ -96,7 +96,6 @@ class OcrJointConfig(PreTrainedConfig):
     threshold: float | None = None
     calibration_quantile: float = 0.02
     threshold_margin: float = 2.0
-    handback_agreement: float | None = None  # probe: also require agreement <= this to hand back
 
     # Recovery vector and planner.
     magnitude: str = "log_deficit"

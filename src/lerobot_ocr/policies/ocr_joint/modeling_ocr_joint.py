@@ -451,10 +451,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             self._new_chunks = None
             return self._unchecked
         score = obs.recovery.score.to(device)
-        deep = None
-        if self.config.handback_agreement is not None:
-            deep = obs.recovery.agreement.to(device) <= self.config.handback_agreement
-        decision = decide(score, float(self.manifold.threshold_), self._switch, deep)
+        decision = decide(score, float(self.manifold.threshold_), self._switch)
         if bool(decision.needs_chunk.any()):
             self._plan_chunks(obs, decision.needs_chunk, noise)
         if bool(decision.hand_back.any()):

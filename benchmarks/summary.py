@@ -54,6 +54,15 @@ def fmt(successes: int, n: int) -> str:
     return f"{rate[:-1] if rate.endswith('0') else rate} [{lo:.2f}, {hi:.2f}]"
 
 
+def rate(block: dict, budget: str = "") -> str:
+    """A cell's rate [interval] from its `success_rate<budget>` and `n_episodes`; `budget`: "" (strict),
+    "_episode" or "_reference_budget"; "—" when that budget was not recorded."""
+    if f"success_rate{budget}" not in block:
+        return "—"
+    n = block["n_episodes"]
+    return fmt(round(block[f"success_rate{budget}"] * n), n)
+
+
 def reference_budget(result: dict) -> tuple[str, str, str]:
     """Joint OOD within the reference's decision budget, the recovery efficiency (that ÷ base ID within
     the same budget: the paper's 0.93 / 0.90 ≈ 1.03) and the mean first hand-back step of the joint OOD
@@ -61,12 +70,10 @@ def reference_budget(result: dict) -> tuple[str, str, str]:
     joint, base = result.get("joint_ood", {}), result.get("base_id", {})
     if "success_rate_reference_budget" not in joint:
         return "—", "—", "—"
-    n = joint["n_episodes"]
-    rate = fmt(round(joint["success_rate_reference_budget"] * n), n)
     base_rate = base.get("success_rate_reference_budget")
     efficiency = f"{joint['success_rate_reference_budget'] / base_rate:.2f}" if base_rate else "—"
     first = (joint.get("started_ood") or {}).get("mean_first_base_step")
-    return rate, efficiency, f"{first:.0f}" if first is not None else "—"
+    return rate(joint, "_reference_budget"), efficiency, f"{first:.0f}" if first is not None else "—"
 
 
 def table(results_dir: Path = HERE / "results") -> str:
@@ -94,15 +101,6 @@ def table(results_dir: Path = HERE / "results") -> str:
     return "\n".join(lines)
 
 
-def cell(result: dict, name: str, budget: str = "") -> str:
-    """`name`'s rate [interval] in a continual results JSON; `budget`: "" (strict), "_episode" or
-    "_reference_budget"; "—" when the cell or that budget was not recorded."""
-    c = result["cells"].get(name, {})
-    if f"success_rate{budget}" not in c:
-        return "—"
-    return fmt(round(c[f"success_rate{budget}"] * c["n_episodes"]), c["n_episodes"])
-
-
 def continual_table(results_dir: Path = HERE / "results") -> str:
     """The paper's Table III beside each `<task>_continual_*.json` (`benchmarks/continual.py`): the benchmark
     rows (`PROFILES` order) first, then the others by label; `quick` smoke runs left out."""
@@ -120,8 +118,10 @@ def continual_table(results_dir: Path = HERE / "results") -> str:
         paper = CONTINUAL_PAPER[prefix]
         for r in records:
             keep = "" if r["keep"] == "episode" else f", `--keep={r['keep']}`"
-            shown = [cell(r, n) for n in ("base_id", "base_ood", "aug_base_id", "aug_base_ood")]
-            shown += [cell(r, "aug_base_ood", "_episode"), cell(r, "aug_joint_ood", "_reference_budget")]
+            cells = r["cells"]
+            shown = [rate(cells.get(n, {})) for n in ("base_id", "base_ood", "aug_base_id", "aug_base_ood")]
+            shown += [rate(cells.get("aug_base_ood", {}), "_episode")]
+            shown += [rate(cells.get("aug_joint_ood", {}), "_reference_budget")]
             n = "/".join(sorted({str(c["n_episodes"]) for c in r["cells"].values()}, key=int))
             lines.append(
                 f"| {title} | `{r['label']}`{keep} ({r['date']}) | {' | '.join(shown)} | {n} | "

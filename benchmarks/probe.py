@@ -112,6 +112,7 @@ def main() -> None:
         "--policy.device=cpu",
         f"--seed={EVAL_SEED}",
         "--eval.use_async_envs=false",
+        "--ocr.videos=1",
         f"--output_dir={out}",
         *TASK_ARGS[args.env_type],
         *args.change,

@@ -92,3 +92,29 @@ def test_convert_train_eval(pusht_dataset, diffusion_base, tmp_path, monkeypatch
     # per episode, cut at its end: the rollout's done flags lined up with the policy's steps
     assert len(stats["episode_steps"]) == 1 and 1 <= stats["episode_steps"][0] <= 12
     assert len(stats["recovery_fraction"]) == len(stats["first_base_step"]) == 1
+
+
+def test_eval_renders_the_videos_asked_for_and_async_envs_change_no_episode(
+    diffusion_base, converted_dataset, tmp_path
+):
+    """`--ocr.videos=1` renders one episode (lerobot-eval: 10); worker processes (`use_async_envs`) give
+    every episode the same outcome as one process: the env seeds and the policy's noise do not move."""
+    from lerobot_ocr.cli import main
+    from test_ocr_joint import make_joint
+
+    make_joint(diffusion_base, converted_dataset).save_pretrained(tmp_path / "ckpt")
+    common = [f"--policy.path={tmp_path / 'ckpt'}", "--env.type=pusht_ocr", "--env.region=ood",
+              "--env.episode_length=10", "--eval.n_episodes=2", "--eval.batch_size=2", "--policy.device=cpu",
+              "--seed=7"]  # fmt: skip
+    outcomes = {}
+    for use_async in ("false", "true"):
+        out = tmp_path / f"eval_async_{use_async}"
+        args = [*common, "--ocr.videos=1", f"--eval.use_async_envs={use_async}", f"--output_dir={out}"]
+        assert main(["eval", *args]) == 0
+        assert len(list((out / "videos").rglob("*.mp4"))) == 1
+        metrics = json.loads((out / "eval_info.json").read_text())["per_task"][0]["metrics"]
+        outcomes[use_async] = [metrics[k] for k in ("successes", "sum_rewards", "max_rewards")]
+        assert len(outcomes[use_async][1]) == 2
+    assert outcomes["false"] == outcomes["true"]
+    with pytest.raises(ValueError, match="--ocr.videos must be an integer >= 0"):
+        main(["eval", *common, "--ocr.videos=all", f"--output_dir={tmp_path / 'bad'}"])

@@ -189,6 +189,7 @@ def format_start_split(rows: dict[str, dict]) -> str:
 
 
 OCR_FLAGS = ("step_budget", "decision_budget")  # `--ocr.<flag>=N`: ours, not passed to lerobot-eval
+VIDEOS_FLAG = "videos"  # `--ocr.videos=N`: episodes rendered into videos (lerobot-eval's own: 10)
 
 
 def run_eval(args: list[str]) -> dict:
@@ -198,9 +199,12 @@ def run_eval(args: list[str]) -> dict:
     `--ocr.decision_budget=N` (success within N policy decisions, each a base chunk or a recovery
     chunk: the reference's joint protocol). Run the episodes long enough for both
     (`--env.episode_length`); per-episode success steps and decisions go to `<output_dir>/episodes.json`.
+    `--ocr.videos=N`: render only the first N episodes into videos (lerobot-eval renders 10; rendering
+    every step of a batch costs more than simulating it, see RESULTS.md "Eval cell time").
 
     Raises:
-        ValueError: no `--output_dir=` among `args`, or an `--ocr.` flag that is not an integer >= 1.
+        ValueError: no `--output_dir=` among `args`, an `--ocr.` budget that is not an integer >= 1, or
+            `--ocr.videos` not an integer >= 0.
     """
     from lerobot.scripts import lerobot_eval
 
@@ -213,11 +217,13 @@ def run_eval(args: list[str]) -> dict:
             if not value.isdigit() or int(value) < 1:
                 raise ValueError(f"--ocr.{flag} must be an integer >= 1, got {value!r}.")
             budgets[flag] = int(value)
-    unknown = [
-        a for a in args if a.startswith("--ocr.") and a.split("=")[0][len("--ocr.") :] not in OCR_FLAGS
-    ]
+    videos = _arg(args, f"ocr.{VIDEOS_FLAG}")
+    if videos is not None and not videos.isdigit():
+        raise ValueError(f"--ocr.{VIDEOS_FLAG} must be an integer >= 0, got {videos!r}.")
+    ours = (*OCR_FLAGS, VIDEOS_FLAG)
+    unknown = [a for a in args if a.startswith("--ocr.") and a.split("=")[0][len("--ocr.") :] not in ours]
     if unknown:
-        raise ValueError(f"Unknown flag(s) {unknown}; ours are {[f'--ocr.{f}' for f in OCR_FLAGS]}.")
+        raise ValueError(f"Unknown flag(s) {unknown}; ours are {[f'--ocr.{f}' for f in ours]}.")
     args = [a for a in args if not a.startswith("--ocr.")]
     output_dir = _arg(args, "output_dir")
     if output_dir is None:
@@ -243,8 +249,16 @@ def run_eval(args: list[str]) -> dict:
         successes.append(data["success"].cpu().numpy())
         return data
 
+    original_eval_all = lerobot_eval.eval_policy_all
+
+    def eval_policy_all(*a, **kw):
+        if videos is not None and kw.get("max_episodes_rendered", 0) > 0:
+            kw["max_episodes_rendered"] = int(videos)
+        return original_eval_all(*a, **kw)
+
     OcrJointPolicy.reset = reset
     lerobot_eval.rollout = rollout
+    lerobot_eval.eval_policy_all = eval_policy_all
     argv = sys.argv
     try:
         sys.argv = ["lerobot-eval", *args]
@@ -253,6 +267,7 @@ def run_eval(args: list[str]) -> dict:
         sys.argv = argv
         OcrJointPolicy.reset = original_reset
         lerobot_eval.rollout = original_rollout
+        lerobot_eval.eval_policy_all = original_eval_all
     eval_info = json.loads((Path(output_dir) / "eval_info.json").read_text())
     ocr = None
     batches = []

@@ -220,8 +220,9 @@ def eval_args(
         f"--policy.device={p['device']}",
         f"--seed={EVAL_SEED}",
         f"--output_dir={out}",
-        # CPU: one process; async workers would each spend ~10 s importing LeRobot on a 2-core machine.
+        # CPU: one process; ten worker processes took 2.1x as long on 2 cores (RESULTS.md "Eval cell time").
         f"--eval.use_async_envs={'true' if p['device'] != 'cpu' else 'false'}",
+        "--ocr.videos=1",  # the pictures keep episode 0's; rendering 10 costs more than simulating them
         *task.eval_overrides,
         *([f"--env.episode_length={task.episode_length}"] if task.episode_length else []),
         *([f"--ocr.step_budget={task.step_budget}"] if task.step_budget else []),

@@ -1,13 +1,14 @@
-"""Benchmark: wall time of one eval cell on CPU: rollout videos of 10 episodes vs 1, sync vs async envs.
+"""Benchmark: wall time of one eval cell on CPU: rollout videos of 10 episodes, 1 or none; sync vs async envs.
 
     MUJOCO_GL=egl .venv/bin/python benchmarks/eval_cell_time.py [--task square] [--policy.path CKPT]
-        [--episodes 20] [--no-update]
+        [--episodes 20] [--describe TEXT] [--no-update]
 
 Runs the same cell (`lerobot_ocr.pipeline.eval_args`: the task's protocol, seeds 100000+i, batch 10, OOD
-starts) three ways: LeRobot's defaults (sync envs, videos of the first 10 episodes), sync with one video
-(`lerobot-ocr eval --ocr.videos=1`: the pipelines keep only episode 0's), and async envs (one worker process
-per env) with one video; checks that every episode's outcome (success, sum and max reward) is the same in
-all three: the env seeds and the policy's random stream do not depend on where the envs step. Default
+starts) four ways with sync envs (one process) rendering lerobot-eval's 10 videos, 1 (`lerobot-ocr eval
+--ocr.videos=1`, what the pipelines pass: they keep episode 0's) or none, and with async envs (one worker
+process per env) rendering none: lerobot-eval renders every async env whenever it renders one, so async is
+compared without videos. Checks that every episode's outcome (success, sum and max reward) is the same in
+all four: the env seeds and the policy's random stream do not depend on where the envs step. Default
 policy: the task's `cpu` chain base (`outputs/<task>_ocr_cpu/base`; run the chain first). Writes
 `benchmarks/results/eval_cell_time.json` and the "Eval cell time" section of RESULTS.md.
 """
@@ -43,7 +44,12 @@ def outcomes(out: Path) -> list[tuple]:
 
 
 # name: (async envs, episodes rendered); the first is LeRobot's default
-MODES = {"sync_10_videos": (False, 10), "sync_1_video": (False, 1), "async_1_video": (True, 1)}
+MODES = {
+    "sync_10_videos": (False, 10),
+    "sync_1_video": (False, 1),
+    "sync_0_videos": (False, 0),
+    "async_0_videos": (True, 0),
+}
 FLAGS = ("--eval.use_async_envs=", "--ocr.videos=")
 
 
@@ -53,6 +59,7 @@ def main() -> None:
     parser.add_argument("--policy.path", dest="policy", default=None)
     parser.add_argument("--region", choices=["id", "ood"], default="ood")
     parser.add_argument("--episodes", type=int, default=20)
+    parser.add_argument("--describe", default=None, help="how RESULTS.md names the policy (default: path)")
     parser.add_argument("--no-update", action="store_true")
     args = parser.parse_args()
     task = TASKS[args.task]
@@ -65,6 +72,7 @@ def main() -> None:
         "benchmark": "eval_cell_time",
         "task": task.name,
         "policy": str(policy.relative_to(REPO) if policy.is_relative_to(REPO) else policy),
+        "policy_description": args.describe,
         "region": args.region,
         "episodes": args.episodes,
         "batch_size": p["eval_batch"],
@@ -101,7 +109,8 @@ def main() -> None:
     body = "\n".join(
         [
             f"One {task.title} cell ({args.region.upper()} starts, {args.episodes} episodes, batch "
-            f"{p['eval_batch']}, the chain's protocol) of `{results['policy']}`, whole command wall time "
+            f"{p['eval_batch']}, the chain's protocol) of {args.describe or '`' + results['policy'] + '`'}, "
+            "whole command wall time "
             "(process start, env creation and the workers' imports included).",
             "",
             "| envs, videos | wall time (s) | speed-up |",
@@ -109,8 +118,11 @@ def main() -> None:
             *rows,
             "",
             f"Every episode's outcome (success, sum and max reward) "
-            f"{'identical' if results['same_episodes'] else 'DIFFERENT'} in all three "
-            f"({results['successes']}/{args.episodes} successes).",
+            f"{'identical' if results['same_episodes'] else 'DIFFERENT'} in all four "
+            f"({results['successes']}/{args.episodes} successes). Async is compared without videos: "
+            "lerobot-eval renders every async env whenever it renders one. The pipelines pass "
+            "`--ocr.videos=1` (they keep episode 0's video) and use sync envs on CPU "
+            '(EXPERIMENTS.md "Pipeline speed on CPU").',
             "",
             f"Machine: {results['machine']}. Date: {results['date']}.",
             "",

@@ -116,5 +116,8 @@ def test_eval_renders_the_videos_asked_for_and_async_envs_change_no_episode(
         outcomes[use_async] = [metrics[k] for k in ("successes", "sum_rewards", "max_rewards")]
         assert len(outcomes[use_async][1]) == 2
     assert outcomes["false"] == outcomes["true"]
+    from lerobot.scripts import lerobot_eval
+
+    assert lerobot_eval.eval_policy_all.__qualname__ == "eval_policy_all"  # LeRobot's own again
     with pytest.raises(ValueError, match="--ocr.videos must be an integer >= 0"):
         main(["eval", *common, "--ocr.videos=all", f"--output_dir={tmp_path / 'bad'}"])

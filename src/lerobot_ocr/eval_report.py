@@ -199,8 +199,9 @@ def run_eval(args: list[str]) -> dict:
     `--ocr.decision_budget=N` (success within N policy decisions, each a base chunk or a recovery
     chunk: the reference's joint protocol). Run the episodes long enough for both
     (`--env.episode_length`); per-episode success steps and decisions go to `<output_dir>/episodes.json`.
-    `--ocr.videos=N`: render only the first N episodes into videos (lerobot-eval renders 10; rendering
-    every step of a batch costs more than simulating it, see RESULTS.md "Eval cell time").
+    `--ocr.videos=N`: render only the first N episodes into videos (lerobot-eval renders 10, none with
+    `--eval.recording=true`; with sync envs, rendering a batch's 10 envs every step costs more than
+    simulating them, see RESULTS.md "Eval cell time"; async envs render every env whenever one is asked).
 
     Raises:
         ValueError: no `--output_dir=` among `args`, an `--ocr.` budget that is not an integer >= 1, or
@@ -214,11 +215,11 @@ def run_eval(args: list[str]) -> dict:
     for flag in OCR_FLAGS:
         value = _arg(args, f"ocr.{flag}")
         if value is not None:
-            if not value.isdigit() or int(value) < 1:
+            if not (value.isascii() and value.isdigit()) or int(value) < 1:
                 raise ValueError(f"--ocr.{flag} must be an integer >= 1, got {value!r}.")
             budgets[flag] = int(value)
     videos = _arg(args, f"ocr.{VIDEOS_FLAG}")
-    if videos is not None and not videos.isdigit():
+    if videos is not None and not (videos.isascii() and videos.isdigit()):
         raise ValueError(f"--ocr.{VIDEOS_FLAG} must be an integer >= 0, got {videos!r}.")
     ours = (*OCR_FLAGS, VIDEOS_FLAG)
     unknown = [a for a in args if a.startswith("--ocr.") and a.split("=")[0][len("--ocr.") :] not in ours]

@@ -222,7 +222,7 @@ def eval_args(
         f"--output_dir={out}",
         # CPU: one process; ten worker processes took 2.1x as long on 2 cores (RESULTS.md "Eval cell time").
         f"--eval.use_async_envs={'true' if p['device'] != 'cpu' else 'false'}",
-        "--ocr.videos=1",  # the pictures keep episode 0's; rendering 10 costs more than simulating them
+        "--ocr.videos=1",  # the pictures keep episode 0's; rendering 10 sync envs costs more than their sim
         *task.eval_overrides,
         *([f"--env.episode_length={task.episode_length}"] if task.episode_length else []),
         *([f"--ocr.step_budget={task.step_budget}"] if task.step_budget else []),

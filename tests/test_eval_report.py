@@ -157,3 +157,15 @@ def test_paired_outcomes_count_per_episode_within_the_budget():
     assert paired_outcomes(a, b, budget=10_000) == whole
     with pytest.raises(ValueError, match="same episodes"):
         paired_outcomes(a, {"success_step": [1]})
+
+
+def test_run_eval_checks_its_own_flags_before_running_and_the_last_one_wins():
+    """`--ocr.*` flags fail fast with the value named; repeated, the last counts (as LeRobot's flags)."""
+    from lerobot_ocr.eval_report import run_eval
+
+    with pytest.raises(ValueError, match="--ocr.videos must be an integer >= 0, got 'x'"):
+        run_eval(["--ocr.videos=1", "--ocr.videos=x", "--output_dir=/nonexistent"])
+    with pytest.raises(ValueError, match="--ocr.step_budget must be an integer >= 1, got '²'"):
+        run_eval(["--ocr.step_budget=²", "--output_dir=/nonexistent"])
+    with pytest.raises(ValueError, match=r"Unknown flag\(s\) \['--ocr.video=1'\]"):
+        run_eval(["--ocr.video=1", "--output_dir=/nonexistent"])

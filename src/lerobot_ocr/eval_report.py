@@ -95,7 +95,8 @@ def episode_modes(in_recovery, steps: list[int] | None = None) -> dict[str, list
 
 
 def _arg(args: list[str], name: str) -> str | None:
-    for a in args:
+    """The value of `--<name>=<value>` in `args`; the last one wins, as in LeRobot's (draccus) parsing."""
+    for a in reversed(args):
         if a.startswith(f"--{name}="):
             return a.split("=", 1)[1]
     return None

@@ -220,7 +220,7 @@ def eval_args(
         f"--policy.device={p['device']}",
         f"--seed={EVAL_SEED}",
         f"--output_dir={out}",
-        # CPU: one process; ten worker processes took 2.1x as long on 2 cores (RESULTS.md "Eval cell time").
+        # CPU: one process; ten worker processes took 1.3x as long on 2 cores (RESULTS.md "Eval cell time").
         f"--eval.use_async_envs={'true' if p['device'] != 'cpu' else 'false'}",
         "--ocr.videos=1",  # the pictures keep episode 0's; rendering 10 sync envs costs more than their sim
         *task.eval_overrides,

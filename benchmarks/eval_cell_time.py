@@ -20,6 +20,7 @@ import datetime as dt
 import json
 import os
 import platform
+import shlex
 import sys
 import tempfile
 import time
@@ -51,6 +52,13 @@ MODES = {
     "async_0_videos": (True, 0),
 }
 FLAGS = ("--eval.use_async_envs=", "--ocr.videos=")
+
+
+def command_args(args: argparse.Namespace) -> str:
+    """This run's arguments for RESULTS.md (a `--describe` text stands for itself)."""
+    shown = ["--task", args.task, "--region", args.region, "--episodes", str(args.episodes)]
+    shown += ["--policy.path", args.policy] if args.policy else []
+    return shlex.join(shown) + (" --describe <the text above>" if args.describe else "")
 
 
 def main() -> None:
@@ -126,7 +134,7 @@ def main() -> None:
             "",
             f"Machine: {results['machine']}. Date: {results['date']}.",
             "",
-            "Command: `MUJOCO_GL=egl .venv/bin/python benchmarks/eval_cell_time.py`",
+            f"Command: `MUJOCO_GL=egl .venv/bin/python benchmarks/eval_cell_time.py {command_args(args)}`",
         ]
     )
     update_section("Eval cell time", body)

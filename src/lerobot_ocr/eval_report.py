@@ -193,6 +193,20 @@ OCR_FLAGS = ("step_budget", "decision_budget")  # `--ocr.<flag>=N`: ours, not pa
 VIDEOS_FLAG = "videos"  # `--ocr.videos=N`: episodes rendered into videos (lerobot-eval's own: 10)
 
 
+def _ocr_int(args: list[str], flag: str, minimum: int) -> int | None:
+    """The integer value of `--ocr.<flag>=N` in `args` (None if absent).
+
+    Raises:
+        ValueError: N is not a whole number >= `minimum` (ASCII digits).
+    """
+    value = _arg(args, f"ocr.{flag}")
+    if value is None:
+        return None
+    if not (value.isascii() and value.isdigit()) or int(value) < minimum:
+        raise ValueError(f"--ocr.{flag} must be an integer >= {minimum}, got {value!r}.")
+    return int(value)
+
+
 def run_eval(args: list[str]) -> dict:
     """Run lerobot-eval with `args` (CLI strings) in this process; return `summarize(...)`.
 
@@ -212,16 +226,8 @@ def run_eval(args: list[str]) -> dict:
 
     from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
 
-    budgets = {}
-    for flag in OCR_FLAGS:
-        value = _arg(args, f"ocr.{flag}")
-        if value is not None:
-            if not (value.isascii() and value.isdigit()) or int(value) < 1:
-                raise ValueError(f"--ocr.{flag} must be an integer >= 1, got {value!r}.")
-            budgets[flag] = int(value)
-    videos = _arg(args, f"ocr.{VIDEOS_FLAG}")
-    if videos is not None and not (videos.isascii() and videos.isdigit()):
-        raise ValueError(f"--ocr.{VIDEOS_FLAG} must be an integer >= 0, got {videos!r}.")
+    budgets = {flag: n for flag in OCR_FLAGS if (n := _ocr_int(args, flag, minimum=1)) is not None}
+    videos = _ocr_int(args, VIDEOS_FLAG, minimum=0)
     ours = (*OCR_FLAGS, VIDEOS_FLAG)
     unknown = [a for a in args if a.startswith("--ocr.") and a.split("=")[0][len("--ocr.") :] not in ours]
     if unknown:
@@ -255,7 +261,7 @@ def run_eval(args: list[str]) -> dict:
 
     def eval_policy_all(*a, **kw):
         if videos is not None and kw.get("max_episodes_rendered", 0) > 0:
-            kw["max_episodes_rendered"] = int(videos)
+            kw["max_episodes_rendered"] = videos
         return original_eval_all(*a, **kw)
 
     OcrJointPolicy.reset = reset

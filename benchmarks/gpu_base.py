@@ -113,7 +113,8 @@ def pack(data: Path, repo_id: str = "local/pusht_base", out: Path = PACK) -> Non
     from lerobot.datasets import EpisodeAwareSampler, LeRobotDataset
     from lerobot.datasets.factory import resolve_delta_timestamps
     from lerobot.policies.factory import make_pre_post_processors
-    from tqdm import tqdm
+
+    from lerobot_ocr.train_in_memory import cache_items
 
     meta = LeRobotDataset(repo_id, root=data).meta
     cfg = base_config(meta)
@@ -124,7 +125,8 @@ def pack(data: Path, repo_id: str = "local/pusht_base", out: Path = PACK) -> Non
         drop_n_last_frames=cfg.drop_n_last_frames,
     )
     indices = sorted(iter(sampler))
-    items = [ds[i] for i in tqdm(indices, desc="items", mininterval=5)]
+    cached = cache_items(ds)
+    items = [cached[i] for i in indices]
     keys = [
         k
         for k, v in items[0].items()

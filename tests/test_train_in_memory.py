@@ -29,20 +29,50 @@ def _lowdim_dataset(root: Path):
             )
         ds.save_episode()
     ds.finalize()
-    return LeRobotDataset("local/tiny", root=root, delta_timestamps={"action": [0.0, 0.1, 0.2]})
+    return root
+
+
+# windows that reach before the episode's start and past its end, as a diffusion policy's do
+WINDOWS = {"observation.state": [-0.1, 0.0], "action": [-0.1, 0.0, 0.1, 0.2]}
+
+
+def _assert_same_items(ds, cached):
+    assert len(cached) == len(ds)
+    for i in range(len(ds)):
+        a, b = ds[i], cached[i]
+        assert list(a.keys()) == list(b.keys())
+        for k, v in a.items():
+            if isinstance(v, torch.Tensor):
+                assert v.dtype == b[k].dtype, (i, k)
+                assert torch.equal(v, b[k]), (i, k)
+            else:
+                assert v == b[k], (i, k)
 
 
 def test_cached_items_equal_the_datasets(tmp_path):
-    ds = _lowdim_dataset(tmp_path / "tiny")
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    root = _lowdim_dataset(tmp_path / "tiny")
+    ds = LeRobotDataset("local/tiny", root=root, delta_timestamps=WINDOWS)
     cached = cache_items(ds)
-    assert len(cached) == len(ds) == 12
-    for i in (0, 5, 11):  # includes padded action windows at episode ends
-        a, b = ds[i], cached[i]
-        assert a.keys() == b.keys()
-        for k, v in a.items():
-            if isinstance(v, torch.Tensor):
-                torch.testing.assert_close(v, b[k])
+    assert len(cached) == 12
+    _assert_same_items(ds, cached)  # every item, the padded windows at both episode ends among them
+    assert cached[0]["action_is_pad"].tolist() == [True, False, False, False]
+    assert cached[5]["action_is_pad"].tolist() == [False, False, True, True]
     assert cached.meta is ds.meta and cached.num_episodes == 2  # everything else is the dataset's own
+    cached[3]["action"].zero_()  # items are copies: a caller's in-place change reaches neither view
+    assert torch.equal(cached[3]["action"], ds[3]["action"])
+
+
+def test_cached_items_of_an_episode_filtered_dataset_and_one_without_windows(tmp_path):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    root = _lowdim_dataset(tmp_path / "tiny")
+    second = LeRobotDataset("local/tiny", root=root, delta_timestamps=WINDOWS, episodes=[1])
+    assert second[0]["index"].item() == 6  # absolute indices differ from rows
+    _assert_same_items(second, cache_items(second))
+    plain = LeRobotDataset("local/tiny", root=root)
+    _assert_same_items(plain, cache_items(plain))
 
 
 @pytest.mark.slow

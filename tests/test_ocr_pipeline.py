@@ -47,20 +47,25 @@ def test_a_training_stage_resumes_from_its_last_checkpoint(tmp_path):
         f"pathlib.Path({str(calls)!r}).open('a').write(' '.join(sys.argv[1:]) + '\\n')\n"
         "out = [a.split('=', 1)[1] for a in sys.argv if a.startswith('--output_dir=')]\n"
         "if out:\n"
-        "    ckpt = pathlib.Path(out[0]) / 'checkpoints' / 'last' / 'pretrained_model'\n"
-        "    ckpt.mkdir(parents=True)\n"
-        "    (ckpt / 'train_config.json').write_text('{}')\n"
-        "    sys.exit(1)  # killed after its first checkpoint\n"
+        "    for step in ('000002', '000004'):  # LeRobot's layout: step folders, `last` links the latest\n"
+        "        ckpt = pathlib.Path(out[0]) / 'checkpoints' / step / 'pretrained_model'\n"
+        "        ckpt.mkdir(parents=True)\n"
+        "        (ckpt / 'train_config.json').write_text('{}')\n"
+        "    (pathlib.Path(out[0]) / 'checkpoints' / 'last').symlink_to('000004')\n"
+        "    sys.exit(1)  # killed after its second checkpoint\n"
     )
     out, log = tmp_path / "train", tmp_path / "logs" / "train.log"
     args = [sys.executable, str(fake), "--steps=60000", f"--output_dir={out}"]
     with pytest.raises(RuntimeError):
         train(args, out, log)
+    assert {d.name for d in (out / "checkpoints").iterdir()} == {"000002", "000004", "last"}  # kept to resume
     train(args, out, log)  # the re-run resumes
+    assert {d.name for d in (out / "checkpoints").iterdir()} == {"000004", "last"}  # finished: only the last
+    assert (out / "checkpoints" / "last" / "pretrained_model" / "train_config.json").is_file()
     first, second = calls.read_text().splitlines()
     assert first == f"--steps=60000 --output_dir={out}"
     assert (
         second == f"--resume=true --config_path={out / 'checkpoints/last/pretrained_model/train_config.json'}"
     )
     assert (tmp_path / "logs" / "train.resumed.log").is_file()
-    assert save_freq(60000) == 5000 and save_freq(2000) == 666 and save_freq(2) == 1
+    assert save_freq(60000) == 2000 and save_freq(3000) == 1000 and save_freq(2) == 1

@@ -1,7 +1,7 @@
 """Benchmark: caching a low-dim dataset's training items, item by item vs `lerobot_ocr.train_in_memory`.
 
     .venv/bin/python benchmarks/cache_items_time.py --root outputs/square_ocr_cpu/base_data \
-        [--repo-id local/square_base] [--sample 3000] [--no-update]
+        [--repo-id local/square_base] [--sample 3000] [--note TEXT] [--no-update]
 
 Both build the items the chains' low-dim diffusion bases train on (n_obs_steps 2, horizon 16, the
 windows LeRobot derives from the policy config): `[dataset[i] for i in ...]` (LeRobot's own item path,
@@ -33,6 +33,7 @@ def main() -> None:
     parser.add_argument("--root", type=Path, required=True, help="a low-dim LeRobotDataset folder")
     parser.add_argument("--repo-id", default="local/dataset")
     parser.add_argument("--sample", type=int, default=3000, help="items timed one by one")
+    parser.add_argument("--note", default="", help="a sentence for RESULTS.md: what else the machine ran")
     parser.add_argument("--no-update", action="store_true")
     args = parser.parse_args()
     if not (args.root / "meta" / "info.json").exists():
@@ -73,17 +74,19 @@ def main() -> None:
         "item_by_item_s_projected": item_s * n,
         "cache_items_s": cache_s,
         "identical_on_sample": True,
+        "note": args.note,
     }
     print(json.dumps(results, indent=2))
     if args.no_update:
         return
     (HERE / "results" / "cache_items_time.json").write_text(json.dumps(results, indent=2) + "\n")
+    noted = " --note <the sentence above>" if args.note else ""
     body = "\n".join(
         [
             f"Every training item of `{args.root}` ({n} items; windows of a diffusion base with "
             "n_obs_steps 2 and horizon 16). Item by item is LeRobot's `dataset[i]`, timed on the first "
             f"{sample} items and projected to all {n}; `cache_items` is timed on all of them. Both gave "
-            "identical items on the sample.",
+            f"identical items on the sample. {args.note}".strip(),
             "",
             "| path | seconds for the whole dataset |",
             "|---|---|",
@@ -93,7 +96,7 @@ def main() -> None:
             f"Machine: {results['machine']}. Date: {results['date']}.",
             "",
             f"Command: `.venv/bin/python benchmarks/cache_items_time.py --root {args.root} "
-            f"--repo-id {args.repo_id} --sample {sample}`",
+            f"--repo-id {args.repo_id} --sample {sample}{noted}`",
         ]
     )
     update_section("Caching training items", body)

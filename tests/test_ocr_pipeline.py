@@ -38,7 +38,7 @@ def test_failed_stage_raises_with_the_log_tail(tmp_path):
 
 def test_a_training_stage_resumes_from_its_last_checkpoint(tmp_path):
     """An interrupted training stage goes on from its last checkpoint (lerobot-train --resume), not from 0."""
-    from lerobot_ocr.pipeline import save_freq, train
+    from lerobot_ocr.pipeline import prune_checkpoints, save_freq, train
 
     calls = tmp_path / "calls.txt"
     fake = tmp_path / "fake_trainer.py"  # stands in for lerobot-train: records its flags, then "checkpoints"
@@ -59,6 +59,7 @@ def test_a_training_stage_resumes_from_its_last_checkpoint(tmp_path):
     with pytest.raises(RuntimeError):
         train(args, out, log)
     assert {d.name for d in (out / "checkpoints").iterdir()} == {"000002", "000004", "last"}  # kept to resume
+    assert prune_checkpoints(tmp_path / "no_run") == []  # nothing to keep or delete without a `last`
     train(args, out, log)  # the re-run resumes
     assert {d.name for d in (out / "checkpoints").iterdir()} == {"000004", "last"}  # finished: only the last
     assert (out / "checkpoints" / "last" / "pretrained_model" / "train_config.json").is_file()

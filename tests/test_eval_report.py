@@ -169,3 +169,73 @@ def test_run_eval_checks_its_own_flags_before_running_and_the_last_one_wins():
         run_eval(["--ocr.step_budget=²", "--output_dir=/nonexistent"])
     with pytest.raises(ValueError, match=r"Unknown flag\(s\) \['--ocr.video=1'\]"):
         run_eval(["--ocr.video=1", "--output_dir=/nonexistent"])
+
+
+def _run(successes, max_rewards, eval_s, ocr=True, budgets=None):
+    """One run's (eval_info, ocr_stats, episodes) as `lerobot-ocr eval` writes them."""
+    n = len(successes)
+    metrics = {
+        "sum_rewards": [2 * r for r in max_rewards],
+        "max_rewards": max_rewards,
+        "successes": successes,
+        "video_paths": [],
+    }
+    info = {
+        "per_task": [{"task_group": "pusht_ocr", "task_id": 0, "metrics": metrics}],
+        "per_group": {},
+        "overall": {"avg_max_reward": sum(max_rewards) / n, "eval_s": eval_s},
+    }
+    stats = {
+        "mean_recovery_fraction": 0.5,
+        "recovery_chunks": n,
+        "handbacks": 1,
+        "threshold": -3.0,
+        "started_ood": [True] * n,
+        "episode_steps": [100] * n,
+        "recovery_fraction": [0.5] * n,
+        "first_base_step": [10 if s else -1 for s in successes],
+        "ended_in_recovery": [not s for s in successes],
+    }
+    steps = [300 if s else -1 for s in successes]
+    episodes = {"success_step": steps, "decisions_at_success": [40 if s else -1 for s in successes]}
+    return info, stats if ocr else None, {**episodes, **(budgets or {"step_budget": 400})}
+
+
+def test_runs_over_consecutive_episodes_merge_into_one_cells_files():
+    from lerobot_ocr.eval_report import merge_runs
+
+    a = _run([True, False], [1.0, 0.2], 10.0)
+    b = _run([True, True, False], [1.0, 1.0, 0.4], 5.0)
+    b[1]["episode_steps"] = None  # a run whose steps could not be matched
+    b[1]["recovery_fraction"] = [0.0, 0.0, 1.0]
+    info, ocr, episodes = merge_runs([a, b])
+    metrics = info["per_task"][0]["metrics"]
+    assert metrics["successes"] == [True, False, True, True, False]
+    assert metrics["max_rewards"] == [1.0, 0.2, 1.0, 1.0, 0.4]
+    assert info["overall"]["n_episodes"] == 5 and info["overall"]["pc_success"] == pytest.approx(60.0)
+    assert info["overall"]["avg_max_reward"] == pytest.approx(3.6 / 5) and info["overall"]["eval_s"] == 15.0
+    assert info["per_group"]["pusht_ocr"]["n_episodes"] == 5
+    assert ocr["first_base_step"] == [10, -1, 10, 10, -1] and ocr["episode_steps"] is None
+    assert ocr["mean_recovery_fraction"] == pytest.approx(2.0 / 5) and ocr["recovery_chunks"] == 5
+    assert ocr["handbacks"] == 2 and ocr["threshold"] == -3.0
+    assert episodes["success_step"] == [300, -1, 300, 300, -1] and episodes["step_budget"] == 400
+    row = summarize(info, ocr, episodes)  # reads as one 5-episode run
+    assert row["n_episodes"] == 5 and row["success_rate"] == 0.6
+    assert row["started_ood"]["failed_never_handed_back"] == 2 and row["started_ood"]["episodes"] == 5
+    plain = merge_runs([_run([True], [1.0], 1.0, ocr=False), _run([False], [0.0], 1.0, ocr=False)])
+    assert plain[1] is None and plain[2]["success_step"] == [300, -1]
+
+
+def test_merging_runs_that_do_not_belong_together_is_refused():
+    from lerobot_ocr.eval_report import merge_runs
+
+    with pytest.raises(ValueError, match="different budgets"):
+        merge_runs([_run([True], [1.0], 1.0), _run([True], [1.0], 1.0, budgets={"step_budget": 300})])
+    with pytest.raises(ValueError, match="mixed policies"):
+        merge_runs([_run([True], [1.0], 1.0), _run([True], [1.0], 1.0, ocr=False)])
+    other = _run([True], [1.0], 1.0)
+    other[0]["per_task"][0]["task_group"] = "square_ocr"
+    with pytest.raises(ValueError, match="different tasks"):
+        merge_runs([_run([True], [1.0], 1.0), other])
+    with pytest.raises(ValueError, match="at least one"):
+        merge_runs([])

@@ -121,25 +121,3 @@ def test_eval_renders_the_videos_asked_for_and_async_envs_change_no_episode(
     assert lerobot_eval.eval_policy_all.__qualname__ == "eval_policy_all"  # LeRobot's own again
     with pytest.raises(ValueError, match="--ocr.videos must be an integer >= 0"):
         main(["eval", *common, "--ocr.videos=all", f"--output_dir={tmp_path / 'bad'}"])
-
-
-def test_an_eval_cell_in_chunks_merges_lerobot_evals_files(diffusion_base, converted_dataset, tmp_path):
-    """A pipeline cell run as two `lerobot-ocr eval` processes of 2 episodes reads as one 4-episode run."""
-    from lerobot_ocr.pipeline import EVAL_SEED, PUSHT, evaluate_cell
-    from test_ocr_joint import make_joint
-
-    make_joint(diffusion_base, converted_dataset).save_pretrained(tmp_path / "ckpt")
-    p = {"base": "image", "episodes": 4, "eval_batch": 2, "eval_chunk": 2, "device": "cpu"}
-    out = tmp_path / "eval_joint_ood"
-    row = evaluate_cell(
-        PUSHT, tmp_path / "ckpt", "ood", p, out, tmp_path / "logs" / "eval.log", ["--env.episode_length=10"]
-    )
-    assert row["n_episodes"] == 4 and "mean_recovery_fraction" in row and row["step_budget"] == 400
-    info = json.loads((out / "eval_info.json").read_text())
-    assert info["overall"]["n_episodes"] == 4 and len(info["per_task"][0]["metrics"]["max_rewards"]) == 4
-    assert len(json.loads((out / "ocr_stats.json").read_text())["started_ood"]) == 4
-    assert len(json.loads((out / "episodes.json").read_text())["success_step"]) == 4
-    rendered = [v.relative_to(out / "chunks").parts[:2] for v in (out / "chunks").rglob("*.mp4")]
-    assert rendered == [("000", "videos")]
-    assert (out / "videos" / "pusht_ocr_0" / "eval_episode_0.mp4").is_file()  # where the pictures look
-    assert f"--seed={EVAL_SEED + 2}" in (tmp_path / "logs" / "eval.001.log").read_text().splitlines()[0]

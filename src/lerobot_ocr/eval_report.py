@@ -191,15 +191,6 @@ def format_start_split(rows: dict[str, dict]) -> str:
 
 OCR_FLAGS = ("step_budget", "decision_budget")  # `--ocr.<flag>=N`: ours, not passed to lerobot-eval
 VIDEOS_FLAG = "videos"  # `--ocr.videos=N`: episodes rendered into videos (lerobot-eval's own: 10)
-# per-episode lists of ocr_stats.json (episode_steps: None where steps could not be matched), episodes.json
-OCR_EPISODE_LISTS = (
-    "started_ood",
-    "episode_steps",
-    "recovery_fraction",
-    "first_base_step",
-    "ended_in_recovery",
-)
-EPISODE_LISTS = ("success_step", "decisions_at_success")
 
 
 def _ocr_int(args: list[str], flag: str, minimum: int) -> int | None:
@@ -327,73 +318,6 @@ def run_eval(args: list[str]) -> dict:
         episodes["decisions_at_success"] += decisions_at(steps, decisions, chunk_steps[i])
     (Path(output_dir) / "episodes.json").write_text(json.dumps(episodes))
     return summarize(eval_info, ocr, episodes)
-
-
-def merge_runs(runs: list[tuple[dict, dict | None, dict | None]]) -> tuple[dict, dict | None, dict | None]:
-    """One cell's `(eval_info, ocr_stats, episodes)` from the same files of runs over consecutive episodes.
-
-    `runs` hold each run's `eval_info.json`, `ocr_stats.json` and `episodes.json` (None where it wrote none),
-    in episode order. Per-episode lists are concatenated, so the merged files read as one run's;
-    lerobot-eval's aggregates (`per_group`, `overall`) are recomputed from them, `eval_s` is the runs' sum.
-
-    Raises:
-        ValueError: no runs, or runs that disagree on their tasks, budgets or which files they wrote.
-    """
-    if not runs:
-        raise ValueError("merge_runs needs at least one run.")
-    infos, ocrs, episodes = zip(*runs)
-    keys = [[(t["task_group"], t["task_id"]) for t in info["per_task"]] for info in infos]
-    if any(k != keys[0] for k in keys):
-        raise ValueError(f"The runs evaluated different tasks: {keys}.")
-    if len({o is None for o in ocrs}) > 1 or len({e is None for e in episodes}) > 1:
-        raise ValueError("Some runs wrote ocr_stats.json or episodes.json and others not: mixed policies?")
-    lists = ("sum_rewards", "max_rewards", "successes", "video_paths", "predicted_video_paths")
-    per_task = []
-    for i, (group, task_id) in enumerate(keys[0]):
-        metrics = {k: [x for info in infos for x in info["per_task"][i]["metrics"].get(k, [])] for k in lists}
-        per_task.append({"task_group": group, "task_id": task_id, "metrics": metrics})
-
-    def aggregate(tasks: list[dict]) -> dict:
-        m = {k: [x for t in tasks for x in t["metrics"][k]] for k in lists}
-        mean = lambda xs: float(np.nanmean(np.asarray(xs, dtype=float))) if xs else float("nan")  # noqa: E731
-        return {
-            "avg_sum_reward": mean(m["sum_rewards"]),
-            "avg_max_reward": mean(m["max_rewards"]),
-            "pc_success": mean(m["successes"]) * 100,
-            "n_episodes": len(m["sum_rewards"]),
-            "video_paths": m["video_paths"],
-            "predicted_video_paths": m["predicted_video_paths"],
-        }
-
-    groups = dict.fromkeys(g for g, _ in keys[0])
-    overall = aggregate(per_task)
-    eval_s = sum(info["overall"].get("eval_s") or 0.0 for info in infos)
-    overall.update(eval_s=eval_s, eval_ep_s=eval_s / max(1, overall["n_episodes"]))
-    info = {
-        "per_task": per_task,
-        "per_group": {g: aggregate([t for t in per_task if t["task_group"] == g]) for g in groups},
-        "overall": overall,
-    }
-    ocr = None
-    if ocrs[0] is not None:
-        ocr = {
-            k: None if any(o.get(k) is None for o in ocrs) else [x for o in ocrs for x in o[k]]
-            for k in OCR_EPISODE_LISTS
-        }
-        fractions = ocr["recovery_fraction"]
-        ocr.update(
-            mean_recovery_fraction=sum(fractions) / len(fractions) if fractions else 0.0,
-            recovery_chunks=sum(o["recovery_chunks"] for o in ocrs),
-            handbacks=sum(o["handbacks"] for o in ocrs),
-            threshold=ocrs[0]["threshold"],
-        )
-    merged_episodes = None
-    if episodes[0] is not None:
-        budgets = [{k: v for k, v in e.items() if k not in EPISODE_LISTS} for e in episodes]
-        if any(b != budgets[0] for b in budgets):
-            raise ValueError(f"The runs had different budgets: {budgets}.")
-        merged_episodes = {k: [x for e in episodes for x in e[k]] for k in EPISODE_LISTS} | budgets[0]
-    return info, ocr, merged_episodes
 
 
 def format_table(rows: dict[str, dict]) -> str:

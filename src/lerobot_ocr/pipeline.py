@@ -252,66 +252,21 @@ def eval_args(
 def evaluate_cell(
     task: Task, policy: Path, region: str, p: dict, out: Path, log: Path, env_args: list[str] = ()
 ) -> dict:
-    """Run one cell (`eval_args`) into `out` and return its summary (`eval_report.summarize` of
+    """Run one cell (`eval_args`) into a fresh `out` and return its summary (`eval_report.summarize` of
     `eval_info.json`, plus `ocr_stats.json` / `episodes.json` where the run wrote them).
 
-    With `p["eval_chunk"]`, the cell's episodes run as consecutive evals of that many episodes each (the
-    last one: what is left), in `out/chunks/<k>/` (logs `<log>.<k>.log`): eval k seeds its episodes from
-    `EVAL_SEED + k * eval_chunk`, so every episode starts as in the single run (the policies' sampling
-    noise differs); only eval 0 renders its video. A finished eval is kept (with the arguments it ran
-    with), so an interrupted cell resumes at its first unfinished eval. Their files are merged
-    (`eval_report.merge_runs`) into `out`, and eval 0's videos copied there.
-
     Raises:
-        RuntimeError: an eval failed (see `run`).
+        RuntimeError: the eval failed (see `run`).
     """
-    from lerobot_ocr.eval_report import merge_runs, summarize
+    from lerobot_ocr.eval_report import summarize
 
-    n, chunk = p["episodes"], p.get("eval_chunk") or p["episodes"]
-    if chunk >= n:
-        shutil.rmtree(out, ignore_errors=True)
-        run(eval_args(task, policy, region, p, out, env_args), log)
-        return summarize(*read_eval_files(out))
-    for stale in (out / f for f in (*EVAL_FILES, "videos")):  # merged files of an earlier attempt
-        shutil.rmtree(stale) if stale.is_dir() else stale.unlink(missing_ok=True)
-    runs = []
-    for k, first in enumerate(range(0, n, chunk)):
-        part, size = out / "chunks" / f"{k:03d}", min(chunk, n - first)
-        args = [
-            # lerobot-eval wants batch_size <= n_episodes; the last --seed wins
-            *eval_args(
-                task,
-                policy,
-                region,
-                dict(p, episodes=size, eval_batch=min(p["eval_batch"], size)),
-                part,
-                env_args,
-            ),
-            f"--seed={EVAL_SEED + first}",
-            *(["--ocr.videos=0"] if k else []),
-        ]
-        record = part / "eval_args.json"
-        finished = (part / "episodes.json").is_file() and record.is_file()  # episodes.json: written last
-        if not (finished and json.loads(record.read_text()) == args):
-            shutil.rmtree(part, ignore_errors=True)
-            run(args, log.with_suffix(f".{k:03d}.log"))
-            record.with_suffix(".tmp").write_text(json.dumps(args))
-            record.with_suffix(".tmp").replace(record)  # atomic: a half-written record never passes
-        runs.append(read_eval_files(part))
-    for f, data in zip(EVAL_FILES, merge_runs(runs), strict=True):
-        if data is not None:
-            (out / f).write_text(json.dumps(data, indent=2))
-    if (out / "chunks" / "000" / "videos").is_dir():
-        shutil.copytree(out / "chunks" / "000" / "videos", out / "videos")
-    return summarize(*read_eval_files(out))
-
-
-EVAL_FILES = ("eval_info.json", "ocr_stats.json", "episodes.json")  # what `lerobot-ocr eval` writes
-
-
-def read_eval_files(folder: Path) -> tuple[dict | None, ...]:
-    """`folder`'s `EVAL_FILES`, parsed (None for each one it lacks)."""
-    return tuple(json.loads((folder / f).read_text()) if (folder / f).exists() else None for f in EVAL_FILES)
+    shutil.rmtree(out, ignore_errors=True)
+    run(eval_args(task, policy, region, p, out, env_args), log)
+    read = (
+        json.loads((out / f).read_text()) if (out / f).exists() else None
+        for f in ("eval_info.json", "ocr_stats.json", "episodes.json")
+    )
+    return summarize(*read)
 
 
 def chain_cells(base: Path, joint: Path, names) -> dict[str, tuple[Path, str]]:
@@ -603,7 +558,6 @@ PUSHT = Task(
             "ocr_dims": "[64,128,256]",
             "episodes": 200,  # decide with 200 episodes: 50 gave 0.80 where 200 gave 0.64
             "eval_batch": 10,
-            "eval_chunk": 50,  # an interrupted cell loses at most 50 episodes (`evaluate_cell`)
             "device": "cpu",
         },
         "paper": {
@@ -650,7 +604,6 @@ SQUARE = Task(
             "ocr_dims": "[64,128,256]",
             "episodes": 100,  # issue 21: the Square row decides with >= 100 episodes per cell
             "eval_batch": 10,
-            "eval_chunk": 20,  # at most ≈ 5 min of a ≈ 25-min cell (slowest machine) lost when interrupted
             "device": "cpu",
         },
         "gpu": {

@@ -28,6 +28,7 @@ RETIRED_OPTIONS = (
     "carry_tolerance",
     "recovery_action_repeat",
     "handback_quantile",
+    "handback_agreement",
     "plan",
     "ema_power",
 )

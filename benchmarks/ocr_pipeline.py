@@ -106,8 +106,15 @@ def main(task: Task) -> None:
     protocol = (", eval " + " ".join(task.eval_overrides)) if task.eval_overrides else ""
     if task.step_budget:
         protocol += (
-            f"; {task.episode_length}-step episodes, success counted within {task.step_budget} steps "
-            f"(strict) and within {task.decision_budget} policy decisions (the reference's joint budget)"
+            f"; {task.episode_length}-step episodes"
+            + (f" ({task.joint_episode_length} for ocr_joint)" if task.joint_episode_length else "")
+            + f", success counted within {task.step_budget} steps (strict) and within "
+            + (
+                f"{task.decision_budget} calls of the reference's joint budget in env time (a recovery "
+                f"decision counts its steps / {task.recovery_call_steps})"
+                if task.recovery_call_steps
+                else f"{task.decision_budget} policy decisions (the reference's joint budget)"
+            )
         )
     command = f".venv/bin/python benchmarks/{task.name}_ocr.py --profile {args.profile}"
     command += (" --set " + " ".join(args.set)) if args.set else ""

@@ -6,7 +6,8 @@
         --baseline plain -- --policy.fixed_delay=11
 
 Runs the eval with the benchmarks' protocol (seeds 100000+i, batch 10, sync envs on CPU, the task's
-episode cap and both budgets: 960-step Push-T episodes, success within 400 steps and within 60 decisions),
+episode cap and both budgets: 960-step Push-T episodes, success within 400 steps and within 60 decisions;
+Square: 1080 steps, 400 and 30 calls of the reference),
 then adds the run to `benchmarks/results/probes.json`
 and rewrites the "Probes" section of `benchmarks/EXPERIMENTS.md` from it: one row per probe with its
 change, success rate and 95% interval, its baseline (an earlier probe by name, same seeds) and whether the
@@ -34,7 +35,13 @@ LEDGER = HERE / "results" / "probes.json"
 EXPERIMENTS = HERE / "EXPERIMENTS.md"
 TASK_ARGS = {  # the pipelines' protocol: long episodes, success counted within both budgets
     "pusht_ocr": ["--env.episode_length=960", "--ocr.step_budget=400", "--ocr.decision_budget=60"],
-    "square_ocr": ["--env.visualization_size=64", "--ocr.step_budget=400", "--ocr.decision_budget=30"],
+    "square_ocr": [  # an ocr_joint probe; a base's runs 400 steps (pipeline.SQUARE)
+        "--env.visualization_size=64",
+        "--env.episode_length=1080",
+        "--ocr.step_budget=400",
+        "--ocr.decision_budget=30",
+        "--ocr.recovery_call_steps=36",
+    ],
 }
 
 

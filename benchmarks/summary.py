@@ -135,8 +135,10 @@ def body() -> str:
         "Success rate [95% Wilson interval] per cell; ID / OOD = the object starts inside / outside the "
         "demonstrations' region; base = the policy alone, joint = `ocr_joint` wrapping it. The cells count "
         'success within 400 steps (strict); "reference budget" counts it within the reference\'s joint '
-        "protocol (60 policy decisions on Push-T, 30 on Square, no step cap), the budget of the paper's "
-        "joint OOD number. Recovery efficiency = joint OOD ÷ base ID, both within the reference budget "
+        "protocol (60 policy decisions on Push-T, 30 calls on Square, no step cap), the budget of the "
+        "paper's joint OOD number; a Square recovery call of the reference runs 36 env steps, so each of "
+        "our 12-step recovery decisions counts 1/3 of a call (Square rows before 2026-12-02 count plain "
+        "decisions). Recovery efficiency = joint OOD ÷ base ID, both within the reference budget "
         "(the paper: 0.93 / 0.90 ≈ 1.03). The paper's Push-T base is an image diffusion policy trained on "
         "a GPU; ours are low-dim diffusion policies, trained on 2 CPU cores (`cpu`) or with Diffusion "
         "Policy's recipe on one GPU (`gpu`, evaluated on CPU, `benchmarks/gpu_base.py`).\n\n"

@@ -124,6 +124,41 @@ def test_both_budgets_from_one_long_run():
     assert summarize(info, None, episodes)["success_rate"] == 0.75  # no budget given: the episode's
 
 
+def test_reference_budget_in_env_time_weights_recovery_decisions():
+    """Square: a recovery decision of ours (12 steps) is 12/36 of a reference call (36 env steps)."""
+    from lerobot_ocr.eval_report import decisions_at
+
+    decisions = [[1, 1], [0, 1], [1, 0], [1, 1]]  # (T, B)
+    recovering = [[0, 1], [0, 1], [1, 1], [1, 0]]  # row 0: base then recovery; row 1: recovery then base
+    assert decisions_at([4, 4], decisions) == [3, 3]
+    # row 0 to step 4: a base decision + 2 in recovery; row 1 to step 2: 2 in recovery
+    weighted = decisions_at([4, 2], decisions, recovering=recovering, recovery_weight=1 / 3)
+    assert weighted == [round(1 + 2 / 3, 6), round(2 / 3, 6)]
+    # weight 1 is the plain count, as integers
+    assert decisions_at([4, 4], decisions, recovering=recovering, recovery_weight=1.0) == [3, 3]
+
+    info = {
+        "per_task": [{"metrics": {"successes": [True, True, True, False]}}],
+        "overall": {"avg_max_reward": 0.9, "eval_s": 1.0},
+    }
+    episodes = {  # a long recovery: 45 decisions but only 25 calls; a base-heavy one: 35 and 32
+        "success_step": [300, 700, 900, -1],
+        "decisions_at_success": [20, 45, 35, -1],
+        "calls_at_success": [20.0, 25.0, 32.0, -1],
+        "step_budget": 400,
+        "decision_budget": 30,
+        "recovery_call_steps": 36,
+    }
+    row = summarize(info, None, episodes)
+    assert row["success_rate_reference_budget"] == 0.5  # calls: 20 and 25 are within 30
+    assert row["success_rate_decision_count"] == 0.25 and row["recovery_call_steps"] == 36
+    assert row["success_rate"] == 0.25 and row["success_rate_episode"] == 0.75
+    assert "reference budget (≤ 30 calls, a recovery call = 36 steps)" in format_table({"joint_ood": row})
+    plain = {k: v for k, v in episodes.items() if k not in ("calls_at_success", "recovery_call_steps")}
+    assert summarize(info, None, plain)["success_rate_reference_budget"] == 0.25  # plain decisions
+    assert "success_rate_decision_count" not in summarize(info, None, plain)
+
+
 def test_start_split_counts_both_budgets():
     """The split by where episodes started reports strict and reference-budget successes per group."""
     info = {
@@ -169,3 +204,5 @@ def test_run_eval_checks_its_own_flags_before_running_and_the_last_one_wins():
         run_eval(["--ocr.step_budget=²", "--output_dir=/nonexistent"])
     with pytest.raises(ValueError, match=r"Unknown flag\(s\) \['--ocr.video=1'\]"):
         run_eval(["--ocr.video=1", "--output_dir=/nonexistent"])
+    with pytest.raises(ValueError, match="--ocr.recovery_call_steps must be an integer >= 1, got '0'"):
+        run_eval(["--ocr.recovery_call_steps=0", "--output_dir=/nonexistent"])

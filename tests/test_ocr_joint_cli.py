@@ -78,10 +78,15 @@ def test_convert_train_eval(pusht_dataset, diffusion_base, tmp_path, monkeypatch
                 "--eval.batch_size=1",
                 "--policy.device=cpu",
                 f"--output_dir={out}",
+                "--ocr.decision_budget=30",
+                "--ocr.recovery_call_steps=36",
             ]
         )
         == 0
-    )  # lerobot-eval's own flags, passed through
+    )  # lerobot-eval's own flags, passed through; ours taken out
+    episodes = json.loads((out / "episodes.json").read_text())
+    assert episodes["recovery_call_steps"] == 36 and episodes["decision_budget"] == 30
+    assert len(episodes["calls_at_success"]) == len(episodes["decisions_at_success"]) == 1
     info = json.loads((out / "eval_info.json").read_text())
     assert info["overall"]["n_episodes"] == 1
     stats = json.loads((out / "ocr_stats.json").read_text())

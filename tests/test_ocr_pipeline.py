@@ -70,3 +70,26 @@ def test_a_training_stage_resumes_from_its_last_checkpoint(tmp_path):
     )
     assert (tmp_path / "logs" / "train.resumed.log").is_file()
     assert save_freq(60000) == 2000 and save_freq(3000) == 1000 and save_freq(2) == 1
+
+
+def test_square_cells_run_the_references_protocol_per_policy(tmp_path):
+    """Square (OCR_REFERENCE_CODE_FACTS.md §7): the base alone 400 steps; ocr_joint 30 calls of up to 36
+    steps (1080), its recovery decisions weighted as 12/36 of a call; Push-T's cells are unchanged."""
+    p = ocr_pipeline.SQUARE.profiles["cpu"]
+    policies = {}
+    for kind in ("diffusion", "ocr_joint"):
+        policies[kind] = tmp_path / kind
+        policies[kind].mkdir()
+        (policies[kind] / "config.json").write_text(f'{{"type": "{kind}"}}')
+
+    def flags(task, kind):
+        args = ocr_pipeline.eval_args(task, policies[kind], "ood", p, tmp_path / "out")
+        return {a.split("=")[0]: a.split("=", 1)[1] for a in args if a.startswith("--") and "=" in a}
+
+    base, joint = flags(ocr_pipeline.SQUARE, "diffusion"), flags(ocr_pipeline.SQUARE, "ocr_joint")
+    assert base["--env.episode_length"] == "400" and joint["--env.episode_length"] == "1080"
+    assert base["--ocr.decision_budget"] == joint["--ocr.decision_budget"] == "30"
+    assert joint["--ocr.recovery_call_steps"] == "36" and joint["--ocr.step_budget"] == "400"
+    pusht = [flags(ocr_pipeline.PUSHT, kind) for kind in policies]
+    assert [f["--env.episode_length"] for f in pusht] == ["960", "960"]
+    assert not any("--ocr.recovery_call_steps" in f for f in pusht)

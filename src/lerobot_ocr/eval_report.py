@@ -45,28 +45,46 @@ def success_steps(success) -> list[int]:
     return np.where(s.any(1), s.argmax(1) + 1, -1).tolist()
 
 
-def decisions_at(steps: list[int], decisions=None, action_steps: int | None = None) -> list[int]:
+def decisions_at(
+    steps: list[int],
+    decisions=None,
+    action_steps: int | None = None,
+    recovering=None,
+    recovery_weight: float = 1.0,
+) -> list:
     """Per row, the policy decisions taken up to its step `steps[b]` (-1 where the step is -1).
 
     decisions: (T, B) bool, the row got a new chunk at that step (`ocr_joint`'s `ocr_stats()["decisions"]`);
     else every `action_steps` steps is one decision (a chunking base policy; 1 = every step).
+    recovering: (T, B) bool, the row was in recovery at that step (`ocr_stats()["in_recovery"]`); with it a
+    decision taken in recovery counts `recovery_weight` (the share of one reference call it stands for in
+    env time, see `run_eval`'s `--ocr.recovery_call_steps`), and the counts are floats.
     """
     if decisions is not None:
-        counts = np.cumsum(np.asarray(decisions, dtype=int), axis=0)  # (T, B)
-        return [int(counts[n - 1, b]) if n > 0 else -1 for b, n in enumerate(steps)]
+        d = np.asarray(decisions, dtype=float)
+        weighted = recovering is not None and recovery_weight != 1.0
+        if weighted:
+            d = np.where(np.asarray(recovering, dtype=bool), d * recovery_weight, d)
+        counts = np.cumsum(d, axis=0)  # (T, B)
+        cast = (lambda c: round(float(c), 6)) if weighted else int
+        return [cast(counts[n - 1, b]) if n > 0 else -1 for b, n in enumerate(steps)]
     every = max(1, int(action_steps or 1))
     return [-(-n // every) if n > 0 else -1 for n in steps]
 
 
 def budget_success(episodes: dict, n: int) -> dict:
     """Success under the step budget (strict) and the decision budget (the reference's) of the first `n`
-    episodes of `episodes` = {"success_step", "decisions_at_success", "step_budget", "decision_budget"}:
-    per budget given, its successes, 95% interval and per-episode `solved` flags."""
+    episodes of `episodes` = {"success_step", "decisions_at_success", "step_budget", "decision_budget",
+    optionally "calls_at_success"}: per budget given, its successes, 95% interval and per-episode `solved`
+    flags. With "calls_at_success" (decisions weighted by their env time, `--ocr.recovery_call_steps`)
+    the reference budget counts those, and "decision_count" the plain decisions."""
     steps, decisions = episodes["success_step"][:n], episodes["decisions_at_success"][:n]
+    calls = episodes.get("calls_at_success")
     out = {}
     for key, values, budget in (
         ("strict", steps, episodes.get("step_budget")),
-        ("reference_budget", decisions, episodes.get("decision_budget")),
+        ("reference_budget", decisions if calls is None else calls[:n], episodes.get("decision_budget")),
+        ("decision_count", decisions, episodes.get("decision_budget") if calls is not None else None),
     ):
         if budget is not None:
             solved = [0 < v <= budget for v in values]
@@ -135,6 +153,10 @@ def summarize(eval_info: dict, ocr: dict | None, episodes: dict | None = None) -
             out["success_rate_reference_budget"] = budgets["reference_budget"]["successes"] / n
             out["ci95_reference_budget"] = budgets["reference_budget"]["ci95"]
             out["decision_budget"] = budgets["reference_budget"]["budget"]
+        if "decision_count" in budgets:  # the reference budget counted calls; this, plain decisions
+            out["recovery_call_steps"] = episodes["recovery_call_steps"]
+            out["success_rate_decision_count"] = budgets["decision_count"]["successes"] / n
+            out["ci95_decision_count"] = budgets["decision_count"]["ci95"]
     if ocr is not None:
         out["mean_recovery_fraction"] = ocr["mean_recovery_fraction"]
         started = ocr.get("started_ood")
@@ -189,7 +211,8 @@ def format_start_split(rows: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
-OCR_FLAGS = ("step_budget", "decision_budget")  # `--ocr.<flag>=N`: ours, not passed to lerobot-eval
+# `--ocr.<flag>=N`: ours, not passed to lerobot-eval; kept in episodes.json
+OCR_FLAGS = ("step_budget", "decision_budget", "recovery_call_steps")
 VIDEOS_FLAG = "videos"  # `--ocr.videos=N`: episodes rendered into videos (lerobot-eval's own: 10)
 
 
@@ -214,13 +237,20 @@ def run_eval(args: list[str]) -> dict:
     `--ocr.decision_budget=N` (success within N policy decisions, each a base chunk or a recovery
     chunk: the reference's joint protocol). Run the episodes long enough for both
     (`--env.episode_length`); per-episode success steps and decisions go to `<output_dir>/episodes.json`.
+    `--ocr.recovery_call_steps=N`: the env steps one recovery call runs in the reference's protocol
+    (Square: 12 actions each held 3 steps = 36; `OCR_REFERENCE_CODE_FACTS.md` §6-7). With it, an
+    `ocr_joint` decision taken in recovery counts `n_recovery_action_steps / N` of a call toward
+    `--ocr.decision_budget`, so that the budget is the reference's in env time (episodes.json's
+    `calls_at_success`; the plain count stays `decisions_at_success`, reported as
+    `success_rate_decision_count`). Without it every decision counts 1: right where our recovery chunk
+    runs as many steps as the reference's (Push-T, 16).
     `--ocr.videos=N`: render only the first N episodes into videos (lerobot-eval renders 10, none with
     `--eval.recording=true`; with sync envs, rendering a batch's 10 envs every step costs more than
     simulating them, see RESULTS.md "Eval cell time"; async envs render every env whenever one is asked).
 
     Raises:
-        ValueError: no `--output_dir=` among `args`, an `--ocr.` budget that is not an integer >= 1, or
-            `--ocr.videos` not an integer >= 0.
+        ValueError: no `--output_dir=` among `args`, an `--ocr.` budget or `--ocr.recovery_call_steps`
+            that is not an integer >= 1, or `--ocr.videos` not an integer >= 0.
     """
     from lerobot.scripts import lerobot_eval
 
@@ -311,11 +341,21 @@ def run_eval(args: list[str]) -> dict:
     )
     if policies and not joint:  # ocr_joint's decisions could not be matched to the rollouts
         episodes.pop("decision_budget", None)
+    call_steps = episodes.get("recovery_call_steps")
+    weight = policies[-1].config.n_recovery_action_steps / call_steps if joint and call_steps else None
+    if weight is None:
+        episodes.pop("recovery_call_steps", None)  # not an ocr_joint run (or unmatched): nothing to weight
+    else:
+        episodes["calls_at_success"] = []
     for i, success in enumerate(successes):  # rollouts in eval order, rows in env order
         steps = success_steps(success)
         decisions = batches[i]["decisions"] if joint else None
         episodes["success_step"] += steps
         episodes["decisions_at_success"] += decisions_at(steps, decisions, chunk_steps[i])
+        if weight is not None:
+            episodes["calls_at_success"] += decisions_at(
+                steps, decisions, recovering=batches[i]["in_recovery"], recovery_weight=weight
+            )
     (Path(output_dir) / "episodes.json").write_text(json.dumps(episodes))
     return summarize(eval_info, ocr, episodes)
 
@@ -327,6 +367,10 @@ def format_table(rows: dict[str, dict]) -> str:
     decisions = {r.get("decision_budget") for r in rows.values()} - {None}
     within = f" (≤ {'/'.join(map(str, sorted(steps)))} steps)" if steps else ""
     reference = f" (≤ {'/'.join(map(str, sorted(decisions)))} decisions)" if decisions else ""
+    calls = {r.get("recovery_call_steps") for r in rows.values()} - {None}
+    if calls:  # the reference's calls, a recovery call weighted by its env steps
+        calls_txt = "/".join(map(str, sorted(calls)))
+        reference = reference.replace("decisions)", f"calls, a recovery call = {calls_txt} steps)")
     lines = [
         f"| run | success{within} | 95% interval | reference budget{reference} | episodes | avg max reward "
         "| steps in recovery |",

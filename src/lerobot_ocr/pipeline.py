@@ -52,6 +52,8 @@ class Task:
     step_budget: int | None = None  # success within this many env steps: the strict protocol
     decision_budget: int | None = None  # within this many policy decisions: the reference's joint protocol
     episode_length: int | None = None  # each cell's episode cap, long enough for both budgets
+    joint_episode_length: int | None = None  # an ocr_joint cell's cap, if not episode_length
+    recovery_call_steps: int | None = None  # env steps of one reference recovery call, if not ours
     pictures: Callable[..., list[Path]] | None = None  # (chain, out, env_args) -> files
 
     def generate_args(self, p: dict, root: Path, env_args: list[str]) -> list[str]:
@@ -226,6 +228,9 @@ def eval_args(
 ) -> list[str]:
     """`lerobot-ocr eval` of one cell: fixed seeds, the task's protocol, `env_args` (`--env.<f>=<v>`)."""
     obs = "environment_state_agent_pos" if p["base"] == "lowdim" else "pixels_agent_pos"
+    config = Path(policy) / "config.json"
+    joint = config.exists() and json.loads(config.read_text()).get("type") == "ocr_joint"
+    length = (task.joint_episode_length if joint else None) or task.episode_length
     return [
         str(BIN / "lerobot-ocr"),
         "eval",
@@ -242,9 +247,10 @@ def eval_args(
         f"--eval.use_async_envs={'true' if p['device'] != 'cpu' else 'false'}",
         "--ocr.videos=1",  # the pictures keep episode 0's; rendering 10 sync envs costs more than their sim
         *task.eval_overrides,
-        *([f"--env.episode_length={task.episode_length}"] if task.episode_length else []),
+        *([f"--env.episode_length={length}"] if length else []),
         *([f"--ocr.step_budget={task.step_budget}"] if task.step_budget else []),
         *([f"--ocr.decision_budget={task.decision_budget}"] if task.decision_budget else []),
+        *([f"--ocr.recovery_call_steps={task.recovery_call_steps}"] if task.recovery_call_steps else []),
         *env_args,
     ]
 
@@ -588,10 +594,15 @@ SQUARE = Task(
     paper="Paper (low-dim base, 200 demos): base ID 0.87, base OOD 0.00, joint OOD 0.80.",
     lowdim_description="low-dim base (eef xyz + rot6d + fingers, nut xyz + rot6d + eef-nut)",
     pictures=_square_pictures,
-    # The reference's Square joint eval: 30 policy calls; ours at most 12 steps each, within 400 steps.
+    # The reference's Square evals (OCR_REFERENCE_CODE_FACTS.md §7): the base alone for 400 steps; the
+    # joint policy for 30 calls with no step cap, a base call 8 steps, a recovery call 36 (12 actions each
+    # held 3 steps; ours runs its 12 once, holding measured harmful). So a recovery decision of ours is
+    # 12/36 of a call, and a joint episode gets up to 30 x 36 = 1080 steps to use the whole budget.
     step_budget=400,
     decision_budget=30,
     episode_length=400,
+    joint_episode_length=1080,
+    recovery_call_steps=36,
     profiles={
         "cpu": {
             "demos": 200,

@@ -5,9 +5,10 @@
     .venv/bin/python benchmarks/probe.py --name delay11 --checkpoint $CKPT --region ood --episodes 200 \
         --baseline plain -- --policy.fixed_delay=11
 
-Runs the eval with the benchmarks' protocol (seeds 100000+i, batch 10, sync envs on CPU, the task's
-episode cap and both budgets: 960-step Push-T episodes, success within 400 steps and within 60 decisions;
-Square: 1080 steps, 400 and 30 calls of the reference),
+Runs the eval with the benchmarks' protocol (`lerobot_ocr.pipeline.eval_args`: seeds 100000+i, batch 10,
+sync envs on CPU, the task's episode cap and both budgets: 960-step Push-T episodes, success within 400
+steps and within 60 decisions; Square: 400 steps for a base, 1080 for ocr_joint, success within 400 steps
+and within 30 calls of the reference),
 then adds the run to `benchmarks/results/probes.json`
 and rewrites the "Probes" section of `benchmarks/EXPERIMENTS.md` from it: one row per probe with its
 change, success rate and 95% interval, its baseline (an earlier probe by name, same seeds) and whether the
@@ -29,20 +30,12 @@ REPO = HERE.parent
 sys.path[:0] = [str(HERE), str(REPO / "src")]
 from results_md import update_section  # noqa: E402
 
-from lerobot_ocr.pipeline import BIN, EVAL_SEED, run  # noqa: E402
+from lerobot_ocr.pipeline import TASKS, eval_args, run  # noqa: E402
 
 LEDGER = HERE / "results" / "probes.json"
 EXPERIMENTS = HERE / "EXPERIMENTS.md"
-TASK_ARGS = {  # the pipelines' protocol: long episodes, success counted within both budgets
-    "pusht_ocr": ["--env.episode_length=960", "--ocr.step_budget=400", "--ocr.decision_budget=60"],
-    "square_ocr": [  # an ocr_joint probe; a base's runs 400 steps (pipeline.SQUARE)
-        "--env.visualization_size=64",
-        "--env.episode_length=1080",
-        "--ocr.step_budget=400",
-        "--ocr.decision_budget=30",
-        "--ocr.recovery_call_steps=36",
-    ],
-}
+TASKS_BY_ENV = {task.env_type: task for task in TASKS.values()}
+RENDER_ARGS = {"square_ocr": ["--env.visualization_size=64"]}  # a cheaper rendered first batch
 
 
 def verdict(probe: dict, baseline: dict | None) -> str:
@@ -89,7 +82,7 @@ def main() -> None:
         "--name", required=True, help="this probe's name (unique; a later probe may use it as --baseline)"
     )
     parser.add_argument("--checkpoint", required=True, help="a pretrained_model folder (ocr_joint or base)")
-    parser.add_argument("--env-type", default="pusht_ocr", choices=sorted(TASK_ARGS))
+    parser.add_argument("--env-type", default="pusht_ocr", choices=sorted(TASKS_BY_ENV))
     parser.add_argument("--region", default="ood", choices=["id", "ood"])
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--baseline", default=None, help="name of an earlier probe on the same seeds")
@@ -107,21 +100,11 @@ def main() -> None:
             f"no probe named {args.baseline!r} in {LEDGER} (run the baseline first, without a change)"
         )
     out = REPO / "outputs" / "probes" / args.name
+    profile = {"base": "lowdim", "episodes": args.episodes, "eval_batch": 10, "device": "cpu"}
     cmd = [
-        str(BIN / "lerobot-ocr"),
-        "eval",
-        f"--policy.path={args.checkpoint}",
-        f"--env.type={args.env_type}",
-        f"--env.region={args.region}",
-        f"--env.obs_type={args.obs_type}",
-        f"--eval.n_episodes={args.episodes}",
-        "--eval.batch_size=10",
-        "--policy.device=cpu",
-        f"--seed={EVAL_SEED}",
-        "--eval.use_async_envs=false",
-        "--ocr.videos=1",
-        f"--output_dir={out}",
-        *TASK_ARGS[args.env_type],
+        *eval_args(TASKS_BY_ENV[args.env_type], Path(args.checkpoint), args.region, profile, out),
+        f"--env.obs_type={args.obs_type}",  # the last of a repeated flag wins
+        *RENDER_ARGS.get(args.env_type, []),
         *args.change,
     ]
     run(cmd, out.with_suffix(".log"))

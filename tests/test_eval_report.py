@@ -153,7 +153,9 @@ def test_reference_budget_in_env_time_weights_recovery_decisions():
     assert row["success_rate_reference_budget"] == 0.5  # calls: 20 and 25 are within 30
     assert row["success_rate_decision_count"] == 0.25 and row["recovery_call_steps"] == 36
     assert row["success_rate"] == 0.25 and row["success_rate_episode"] == 0.75
-    assert "reference budget (≤ 30 calls, a recovery call = 36 steps)" in format_table({"joint_ood": row})
+    table = format_table({"joint_ood": row})
+    assert "reference budget (≤ 30 calls, a recovery call = 36 steps; plain decisions)" in table
+    assert "| 0.50 [0.15, 0.85]; 0.25 | 4 |" in table
     plain = {k: v for k, v in episodes.items() if k not in ("calls_at_success", "recovery_call_steps")}
     assert summarize(info, None, plain)["success_rate_reference_budget"] == 0.25  # plain decisions
     assert "success_rate_decision_count" not in summarize(info, None, plain)

@@ -116,6 +116,32 @@ def test_base_history_stays_right_through_a_recovery(diffusion_base, converted_d
     assert len(joint.base._queues["action"]) == n - 1  # a fresh chunk
 
 
+def test_decisions_line_up_with_modes_at_entering_and_handing_back(
+    diffusion_base, converted_dataset, id_pose
+):
+    """`ocr_stats()`: a decision at step t with `in_recovery[t]` is a recovery chunk; entering counts as
+    one, handing back as a base decision: what the reference budget in env time weights (eval_report)."""
+    from lerobot_ocr.eval_report import decisions_at
+
+    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=2)
+    joint.reset()
+    n = joint.base.config.n_action_steps
+    poses = [id_pose] * n + [OOD_POSE] * 4 + [id_pose]  # a base chunk, two recovery chunks, hand back
+    for pose in poses:
+        joint.select_action(observation([pose]))
+    stats = joint.ocr_stats()
+    decided, recovering = stats["decisions"][:, 0].tolist(), stats["in_recovery"][:, 0].tolist()
+    assert [t for t, d in enumerate(decided) if d] == [0, n, n + 2, n + 4]
+    assert recovering == [False] * n + [True] * 4 + [False]
+    assert stats["handbacks"] == 1 and stats["recovery_chunks"] == 2
+    # to the last step: 2 base decisions + 2 recovery chunks of 2 steps, each 2/36 of a 36-step call
+    full = decisions_at([len(poses)], stats["decisions"])
+    weighted = decisions_at(
+        [len(poses)], stats["decisions"], recovering=stats["in_recovery"], recovery_weight=2 / 36
+    )
+    assert full == [4] and weighted == [round(2 + 2 * 2 / 36, 6)]
+
+
 def test_rows_on_the_base_are_checked_at_the_end_of_its_chunk(joint, id_pose):
     joint.reset()
     n = joint.base.config.n_action_steps

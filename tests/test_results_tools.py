@@ -30,6 +30,9 @@ def test_the_summary_gives_the_reference_budget_and_the_recovery_efficiency():
     }
     result["base_id"] |= {"success_rate_reference_budget": 0.77}
     assert summary.reference_budget(result) == ("0.67 [0.60, 0.73]", "0.87", "138")
+    # Square: the budget counted the reference's calls in env time; the plain decisions follow
+    result["joint_ood"] |= {"success_rate_decision_count": 0.5}
+    assert summary.reference_budget(result)[0] == "0.67 [0.60, 0.73]; 0.50 in decisions"
 
 
 def test_a_probe_is_adoptable_only_outside_its_baselines_interval():

@@ -226,7 +226,11 @@ def base_train_args(
 def eval_args(
     task: Task, policy: Path, region: str, p: dict, out: Path, env_args: list[str] = ()
 ) -> list[str]:
-    """`lerobot-ocr eval` of one cell: fixed seeds, the task's protocol, `env_args` (`--env.<f>=<v>`)."""
+    """`lerobot-ocr eval` of one cell: fixed seeds, the task's protocol, `env_args` (`--env.<f>=<v>`).
+
+    The episode cap is `task.joint_episode_length` when `policy` (a local pretrained_model folder) holds
+    an ocr_joint config, else `task.episode_length`.
+    """
     obs = "environment_state_agent_pos" if p["base"] == "lowdim" else "pixels_agent_pos"
     config = Path(policy) / "config.json"
     joint = config.exists() and json.loads(config.read_text()).get("type") == "ocr_joint"
@@ -594,10 +598,12 @@ SQUARE = Task(
     paper="Paper (low-dim base, 200 demos): base ID 0.87, base OOD 0.00, joint OOD 0.80.",
     lowdim_description="low-dim base (eef xyz + rot6d + fingers, nut xyz + rot6d + eef-nut)",
     pictures=_square_pictures,
-    # The reference's Square evals (OCR_REFERENCE_CODE_FACTS.md §7): the base alone for 400 steps; the
-    # joint policy for 30 calls with no step cap, a base call 8 steps, a recovery call 36 (12 actions each
-    # held 3 steps; ours runs its 12 once, holding measured harmful). So a recovery decision of ours is
-    # 12/36 of a call, and a joint episode gets up to 30 x 36 = 1080 steps to use the whole budget.
+    # The reference's Square evals (OCR_REFERENCE_CODE_FACTS.md §7): its base runner stops at 400 steps;
+    # its joint runner at 30 calls with no step cap, a base call 8 steps, a recovery call 36 (12 actions
+    # each held 3 steps; ours runs its 12 once, holding measured harmful). So a recovery decision of ours
+    # is 12/36 of a call, and a joint episode gets up to 30 x 36 = 1080 steps to use the whole budget.
+    # Base cells run 400 steps and report both 400 steps (the base runner) and 30 calls (240 steps: the
+    # joint runner's budget for a policy that never recovers, for the efficiency at equal budget).
     step_budget=400,
     decision_budget=30,
     episode_length=400,

@@ -68,6 +68,42 @@ def parse_args(task: Task) -> argparse.Namespace:
     return args
 
 
+def diagnosis(chain) -> dict | None:
+    """`eval_report.handback_diagnosis` from the chain's base_id and joint_ood runs (None if either is
+    missing)."""
+    from lerobot_ocr.eval_report import handback_diagnosis
+
+    files = {
+        name: chain.eval_dirs[cell] / name.split(":")[1]
+        for name, cell in (
+            ("base:episodes.json", "base_id"),
+            ("joint:episodes.json", "joint_ood"),
+            ("joint:ocr_stats.json", "joint_ood"),
+        )
+        if cell in chain.eval_dirs
+    }
+    if len(files) < 3 or not all(f.exists() for f in files.values()):
+        return None
+    read = {name: json.loads(f.read_text()) for name, f in files.items()}
+    return handback_diagnosis(
+        read["base:episodes.json"], read["joint:episodes.json"], read["joint:ocr_stats.json"]
+    )
+
+
+def diagnosis_text(d: dict | None) -> str:
+    if d is None:
+        return ""
+    return (
+        f"\n\nWhere joint OOD loses within {d['step_budget']} steps ({d['episodes']} episodes that began in "
+        f"recovery; `eval_report.handback_diagnosis`): were each hand-back state a fresh ID start, the base "
+        f"would solve {d['predicted_as_id_starts']:.2f} of them in the steps left (base ID within the "
+        f"budget: {d['base_id_within_budget']:.2f}, so time factor {d['time_factor']:.2f}); they solved "
+        f"{d['observed']:.2f}, state factor "
+        + (f"{d['state_factor']:.2f}" if d["state_factor"] is not None else "—")
+        + " (1: hand-back states as good as ID starts)."
+    )
+
+
 def main(task: Task) -> None:
     from lerobot_ocr.eval_report import format_table
 
@@ -90,6 +126,7 @@ def main(task: Task) -> None:
         "settings": p,
         "env": args.env,
         **chain.results,
+        "handback_diagnosis": diagnosis(chain),
         "stage_seconds": chain.stage_seconds,
         "total_seconds": sum(chain.stage_seconds.values()),
         "wall_seconds_this_run": time.time() - t_start,
@@ -132,7 +169,7 @@ def main(task: Task) -> None:
 {cells}.{overrides}{env}
 {task.paper}
 
-{table}
+{table}{diagnosis_text(payload["handback_diagnosis"])}
 
 Stage wall times: {stages_txt} (total {payload["total_seconds"] / 60:.1f} min). Pictures: {", ".join(files)}.
 

@@ -208,3 +208,20 @@ def test_run_eval_checks_its_own_flags_before_running_and_the_last_one_wins():
         run_eval(["--ocr.video=1", "--output_dir=/nonexistent"])
     with pytest.raises(ValueError, match="--ocr.recovery_call_steps must be an integer >= 1, got '0'"):
         run_eval(["--ocr.recovery_call_steps=0", "--output_dir=/nonexistent"])
+
+
+def test_handback_diagnosis_splits_time_from_the_handback_state():
+    """Time factor: what recovering costs if hand-back states were ID starts; state factor: the rest."""
+    from lerobot_ocr.eval_report import handback_diagnosis
+
+    base = {"success_step": [100, 200, 300, -1]}  # S_ID(400) = 0.75; S_ID(200) = 0.5; S_ID(100) = 0.25
+    joint = {"success_step": [350, -1, 390, 120], "step_budget": 400}
+    ocr = {"started_ood": [True, True, True, False], "first_base_step": [200, -1, 300, -1]}
+    d = handback_diagnosis(base, joint, ocr)
+    # flagged: hand-back at 200 (200 left: 0.5), never (0), at 300 (100 left: 0.25); 2 of 3 solved
+    assert d["episodes"] == 3 and d["base_id_within_budget"] == 0.75
+    assert d["predicted_as_id_starts"] == pytest.approx(0.25)
+    assert d["time_factor"] == pytest.approx(0.25 / 0.75) and d["observed"] == pytest.approx(2 / 3)
+    assert d["state_factor"] == pytest.approx((2 / 3) / 0.25)
+    assert handback_diagnosis(base, {"success_step": [1]}, ocr) is None  # no step budget
+    assert handback_diagnosis(base, joint, {"started_ood": [False] * 4, "first_base_step": [-1] * 4}) is None

@@ -87,3 +87,26 @@ def test_the_continual_summary_sits_beside_table_iii(tmp_path):
     paper = "0.90 / 0.10 → 0.97 / 0.80"
     assert f"| 0.64 [0.57, 0.70] | 0.88 [0.83, 0.92] | 0.84 [0.78, 0.88] | 200 | {paper} |" in rows[0]
     assert "| 0.50 [0.40, 0.60] | — | — | 100 |" in rows[1]  # budgets a run did not record
+
+
+def test_the_chain_publishes_where_joint_ood_loses(tmp_path):
+    """ocr_pipeline reads the chain's base_id and joint_ood runs into the hand-back diagnosis."""
+    import json
+    from types import SimpleNamespace
+
+    import ocr_pipeline
+
+    dirs = {c: tmp_path / f"eval_{c}" for c in ("base_id", "joint_ood")}
+    for d in dirs.values():
+        d.mkdir()
+    chain = SimpleNamespace(eval_dirs=dirs)
+    assert ocr_pipeline.diagnosis(chain) is None and ocr_pipeline.diagnosis_text(None) == ""  # no runs yet
+    (dirs["base_id"] / "episodes.json").write_text(json.dumps({"success_step": [100, 200, 300, -1]}))
+    joint = {"success_step": [350, -1, 390, 120], "step_budget": 400}
+    (dirs["joint_ood"] / "episodes.json").write_text(json.dumps(joint))
+    ocr = {"started_ood": [True, True, True, False], "first_base_step": [200, -1, 300, -1]}
+    (dirs["joint_ood"] / "ocr_stats.json").write_text(json.dumps(ocr))
+    d = ocr_pipeline.diagnosis(chain)
+    assert d["episodes"] == 3 and round(d["time_factor"], 3) == 0.333
+    text = ocr_pipeline.diagnosis_text(d)
+    assert "solve 0.25 of them" in text and "time factor 0.33" in text and "state factor 2.67" in text

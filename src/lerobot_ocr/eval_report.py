@@ -421,3 +421,39 @@ def paired_outcomes(episodes_a: dict, episodes_b: dict, budget: int | None = Non
         "only_b": pairs.count((False, True)),
         "neither": pairs.count((False, False)),
     }
+
+
+def handback_diagnosis(base_id_episodes: dict, joint_episodes: dict, joint_ocr: dict) -> dict | None:
+    """Where joint OOD loses, split into time and hand-back state (`PUSHT_GAP_ANALYSIS.md` §4).
+
+    For each joint episode that began in recovery, the prediction if its hand-back state were a fresh ID
+    start: the base's ID success within the steps left, S_ID(budget − t), with S_ID(τ) the share of base
+    ID episodes (`episodes.json`, same seeds protocol) solved within τ steps and t the episode's first step
+    on the base (`ocr_stats.json`; never handed back: 0). All within the joint run's step budget.
+    - `time_factor` = mean prediction ÷ S_ID(budget): what the steps spent recovering cost;
+    - `state_factor` = observed success of those episodes ÷ mean prediction: how the hand-back states
+      compare with ID starts (1: as good; above 1: the base finishes from them faster than from ID
+      starts, or later recoveries help). None without a step budget or recovery-first episodes.
+    """
+    budget = joint_episodes.get("step_budget")
+    started, first = joint_ocr.get("started_ood"), joint_ocr.get("first_base_step")
+    if not budget or started is None or first is None:
+        return None
+    base_steps = np.asarray(base_id_episodes["success_step"])
+    solved_id = lambda tau: float(np.mean((base_steps > 0) & (base_steps <= tau)))  # noqa: E731
+    n = min(len(started), len(first), len(joint_episodes["success_step"]))
+    rows = [i for i in range(n) if started[i]]
+    if not rows:
+        return None
+    predicted = [solved_id(budget - first[i]) if 0 <= first[i] < budget else 0.0 for i in rows]
+    observed = [0 < joint_episodes["success_step"][i] <= budget for i in rows]
+    s_id, mean_pred = solved_id(budget), float(np.mean(predicted))
+    return {
+        "episodes": len(rows),
+        "step_budget": budget,
+        "base_id_within_budget": s_id,
+        "predicted_as_id_starts": mean_pred,
+        "observed": float(np.mean(observed)),
+        "time_factor": mean_pred / s_id if s_id else None,
+        "state_factor": float(np.mean(observed)) / mean_pred if mean_pred else None,
+    }

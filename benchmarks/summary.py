@@ -21,6 +21,7 @@ sys.path[:0] = [str(HERE), str(REPO / "src")]
 from results_md import update_section  # noqa: E402
 
 from lerobot_ocr.eval_report import wilson_interval  # noqa: E402
+from lerobot_ocr.pipeline import TASKS as CHAINS  # noqa: E402
 
 CELLS = ("base_id", "base_ood", "joint_ood", "joint_id")
 TASKS = {  # results file prefix -> (title, the paper's base ID, base OOD, joint OOD)
@@ -63,16 +64,20 @@ def rate(block: dict, budget: str = "") -> str:
     return fmt(round(block[f"success_rate{budget}"] * n), n)
 
 
-def rate_reference(block: dict) -> str:
+def rate_reference(block: dict, task: str = "") -> str:
     """A cell's rate [interval] within the reference budget, plus its rate in plain decisions where the
-    budget counted the reference's calls in env time (Square: "0.55 [0.45, 0.65]; 0.34 in decisions")."""
+    budget counted the reference's calls in env time (Square: "0.55 [0.45, 0.65]; 0.34 in decisions");
+    a cell of a `task` that counts calls (`pipeline.Task.recovery_call_steps`) measured before it did is
+    marked "(plain decisions)"."""
     shown = rate(block, "_reference_budget")
     if "success_rate_decision_count" in block:
         shown += f"; {block['success_rate_decision_count']:.2f} in decisions"
+    elif shown != "—" and task in CHAINS and CHAINS[task].recovery_call_steps:
+        shown += " (plain decisions)"
     return shown
 
 
-def reference_budget(result: dict) -> tuple[str, str, str]:
+def reference_budget(result: dict, task: str = "") -> tuple[str, str, str]:
     """Joint OOD within the reference's decision budget, the recovery efficiency (that ÷ base ID within
     the same budget: the paper's 0.93 / 0.90 ≈ 1.03) and the mean first hand-back step of the joint OOD
     episodes that began in recovery; "—" for runs made before these were recorded."""
@@ -82,7 +87,7 @@ def reference_budget(result: dict) -> tuple[str, str, str]:
     base_rate = base.get("success_rate_reference_budget")
     efficiency = f"{joint['success_rate_reference_budget'] / base_rate:.2f}" if base_rate else "—"
     first = (joint.get("started_ood") or {}).get("mean_first_base_step")
-    return rate_reference(joint), efficiency, f"{first:.0f}" if first is not None else "—"
+    return rate_reference(joint, task), efficiency, f"{first:.0f}" if first is not None else "—"
 
 
 def table(results_dir: Path = HERE / "results") -> str:
@@ -100,7 +105,7 @@ def table(results_dir: Path = HERE / "results") -> str:
             cells = [largest(result, c) for c in CELLS]
             episodes = "/".join(sorted({str(n) for _, n, _ in cells}, key=int))
             shown = [fmt(k, n) for k, n, _ in cells]
-            reference, efficiency, first = reference_budget(result)
+            reference, efficiency, first = reference_budget(result, prefix)
             row = " | ".join([*shown[:3], reference, shown[3], efficiency, first])
             date = max(d for _, _, d in cells)  # of the newest measurement shown
             lines.append(
@@ -130,7 +135,7 @@ def continual_table(results_dir: Path = HERE / "results") -> str:
             cells = r["cells"]
             shown = [rate(cells.get(n, {})) for n in ("base_id", "base_ood", "aug_base_id", "aug_base_ood")]
             shown += [rate(cells.get("aug_base_ood", {}), "_episode")]
-            shown += [rate_reference(cells.get("aug_joint_ood", {}))]
+            shown += [rate_reference(cells.get("aug_joint_ood", {}), prefix)]
             n = "/".join(sorted({str(c["n_episodes"]) for c in r["cells"].values()}, key=int))
             lines.append(
                 f"| {title} | `{r['label']}`{keep} ({r['date']}) | {' | '.join(shown)} | {n} | "
@@ -142,16 +147,14 @@ def continual_table(results_dir: Path = HERE / "results") -> str:
 def body() -> str:
     return (
         "Success rate [95% Wilson interval] per cell; ID / OOD = the object starts inside / outside the "
-        "demonstrations' region; base = the policy alone, joint = `ocr_joint` wrapping it. The cells count "
-        'success within 400 steps (strict); "reference budget" counts it within the reference\'s joint '
-        "protocol (60 policy decisions on Push-T, 30 calls on Square, no step cap), the budget of the "
-        "paper's joint OOD number. A Square recovery call of the reference runs 36 env steps and ours 12, "
-        "so each of our recovery decisions counts 1/3 of a call: the reference's budget in env time, with "
-        "three times as many (shorter) recovery decisions as it had calls; the stricter plain count, 30 "
-        "decisions, follows after the semicolon (Square rows before 2026-12-02 have only that one). "
-        "Recovery efficiency = joint OOD ÷ base ID, both within the reference budget "
-        "(the paper: 0.93 / 0.90 ≈ 1.03). The paper's Push-T base is an image diffusion policy trained on "
-        "a GPU; ours are low-dim diffusion policies, trained on 2 CPU cores (`cpu`) or with Diffusion "
+        "demonstrations' region; base = the policy alone, joint = `ocr_joint` wrapping it. Cells count "
+        'success within 400 steps; "reference budget" counts it within the reference\'s joint budget (60 '
+        "calls on Push-T, 30 on Square, no step cap), the budget of the paper's joint OOD number. On "
+        "Square one of our 12-step recovery decisions counts as 1/3 of a 36-step reference call; after "
+        'the semicolon, success within 30 plain decisions (see "Which budget" below the tables). Recovery '
+        "efficiency = joint OOD ÷ base ID, both within the reference budget (the paper's 0.93 / 0.90 ≈ "
+        "1.03 divides by its 400-step base). The paper's Push-T base is an image diffusion policy trained "
+        "on a GPU; ours are low-dim diffusion policies, trained on 2 CPU cores (`cpu`) or with Diffusion "
         "Policy's recipe on one GPU (`gpu`, evaluated on CPU, `benchmarks/gpu_base.py`).\n\n"
         + table()
         + "\n\nContinual learning (the paper's Table III, `benchmarks/continual.py`): the base fine-tuned "

@@ -33,6 +33,10 @@ def test_the_summary_gives_the_reference_budget_and_the_recovery_efficiency():
     # Square: the budget counted the reference's calls in env time; the plain decisions follow
     result["joint_ood"] |= {"success_rate_decision_count": 0.5}
     assert summary.reference_budget(result)[0] == "0.67 [0.60, 0.73]; 0.50 in decisions"
+    # a Square row measured before its budget counted calls says it counted plain decisions
+    del result["joint_ood"]["success_rate_decision_count"]
+    assert summary.reference_budget(result, "square")[0] == "0.67 [0.60, 0.73] (plain decisions)"
+    assert summary.reference_budget(result, "pusht")[0] == "0.67 [0.60, 0.73]"
 
 
 def test_a_probe_is_adoptable_only_outside_its_baselines_interval():

@@ -73,21 +73,13 @@ def diagnosis(chain) -> dict | None:
     missing)."""
     from lerobot_ocr.eval_report import handback_diagnosis
 
-    files = {
-        name: chain.eval_dirs[cell] / name.split(":")[1]
-        for name, cell in (
-            ("base:episodes.json", "base_id"),
-            ("joint:episodes.json", "joint_ood"),
-            ("joint:ocr_stats.json", "joint_ood"),
-        )
-        if cell in chain.eval_dirs
-    }
-    if len(files) < 3 or not all(f.exists() for f in files.values()):
+    if not {"base_id", "joint_ood"} <= chain.eval_dirs.keys():
         return None
-    read = {name: json.loads(f.read_text()) for name, f in files.items()}
-    return handback_diagnosis(
-        read["base:episodes.json"], read["joint:episodes.json"], read["joint:ocr_stats.json"]
-    )
+    base, joint = chain.eval_dirs["base_id"], chain.eval_dirs["joint_ood"]
+    paths = (base / "episodes.json", joint / "episodes.json", joint / "ocr_stats.json")
+    if not all(path.exists() for path in paths):
+        return None
+    return handback_diagnosis(*(json.loads(path.read_text()) for path in paths))
 
 
 def diagnosis_text(d: dict | None) -> str:

@@ -30,7 +30,7 @@ REPO = HERE.parent
 sys.path[:0] = [str(HERE), str(REPO / "src")]
 from results_md import update_section  # noqa: E402
 
-from lerobot_ocr.pipeline import TASKS, eval_args, run  # noqa: E402
+from lerobot_ocr.pipeline import TASKS, clear_for_resume, eval_args, run  # noqa: E402
 
 LEDGER = HERE / "results" / "probes.json"
 EXPERIMENTS = HERE / "EXPERIMENTS.md"
@@ -107,6 +107,7 @@ def main() -> None:
         *RENDER_ARGS.get(args.env_type, []),
         *args.change,
     ]
+    clear_for_resume(out, cmd)  # a probe cut short goes on from its last finished batch
     run(cmd, out.with_suffix(".log"))
     from lerobot_ocr.eval_report import summarize
 

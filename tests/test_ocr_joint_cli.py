@@ -3,6 +3,7 @@
 import json
 import sys
 
+import numpy as np
 import pytest
 
 pytestmark = [pytest.mark.slow, pytest.mark.filterwarnings("ignore::UserWarning")]
@@ -126,3 +127,68 @@ def test_eval_renders_the_videos_asked_for_and_async_envs_change_no_episode(
     assert lerobot_eval.eval_policy_all.__qualname__ == "eval_policy_all"  # LeRobot's own again
     with pytest.raises(ValueError, match="--ocr.videos must be an integer >= 0"):
         main(["eval", *common, "--ocr.videos=all", f"--output_dir={tmp_path / 'bad'}"])
+
+
+@pytest.mark.parametrize("joint", [True, False], ids=["ocr_joint", "base"])
+def test_an_interrupted_eval_resumes_with_the_episodes_of_one_run(
+    joint, diffusion_base, converted_dataset, tmp_path, monkeypatch
+):
+    """Every finished batch is recorded; `--ocr.resume=true` replays the recorded ones (no simulation) and
+    runs the rest from the RNG states they left: the same episodes, stats and counts as one run."""
+    import shutil
+
+    from lerobot.scripts import lerobot_eval
+
+    from lerobot_ocr.cli import main
+    from test_ocr_joint import make_joint
+
+    policy = tmp_path / "ckpt"
+    if joint:
+        make_joint(diffusion_base, converted_dataset).save_pretrained(policy)
+    else:
+        shutil.copytree(diffusion_base, policy)
+    simulated = []
+    original = lerobot_eval.rollout
+
+    def counting_rollout(*a, **kw):
+        simulated.append(kw["seeds"])
+        return original(*a, **kw)
+
+    monkeypatch.setattr(lerobot_eval, "rollout", counting_rollout)
+    common = [f"--policy.path={policy}", "--env.type=pusht_ocr", "--env.region=ood",
+              "--env.episode_length=10", "--eval.n_episodes=6", "--eval.batch_size=2", "--policy.device=cpu",
+              "--seed=7", "--eval.use_async_envs=false", "--ocr.decision_budget=60",
+              "--ocr.videos=1"]  # fmt: skip
+    whole, cut = tmp_path / "whole", tmp_path / "cut"
+    assert main(["eval", *common, f"--output_dir={whole}"]) == 0
+    assert len(simulated) == 3 and len(list((whole / "batches").glob("batch_*.npz"))) == 3
+
+    # a run that died during its third batch: two records, no results yet
+    (cut / "batches").mkdir(parents=True)
+    for k in (0, 1):
+        shutil.copy(whole / "batches" / f"batch_0000{k}.npz", cut / "batches")
+    simulated.clear()
+    assert main(["eval", *common, "--ocr.resume=true", f"--output_dir={cut}"]) == 0
+    assert simulated == [[11, 12]]  # only the third batch ran, with its own seeds
+    files = ["episodes.json", *(["ocr_stats.json"] if joint else [])]
+    for name in files:
+        assert json.loads((cut / name).read_text()) == json.loads((whole / name).read_text()), name
+    metrics = [json.loads((d / "eval_info.json").read_text())["per_task"][0]["metrics"] for d in (whole, cut)]
+    for k in ("successes", "sum_rewards", "max_rewards"):
+        assert metrics[0][k] == metrics[1][k] and len(metrics[0][k]) == 6
+    # the T rarely moves in 10 steps, so compare what the policy did: its sampled actions, bit for bit
+    third = [np.load(d / "batches" / "batch_00002.npz")["rollout.action"] for d in (whole, cut)]
+    np.testing.assert_array_equal(third[0], third[1])
+
+    # batches of another run (another seed) are refused and left alone; without resume they are replaced
+    before = sorted(p.stat().st_mtime_ns for p in (cut / "batches").iterdir())
+    with pytest.raises(ValueError, match="batches of another run"):
+        main(["eval", *common, "--seed=8", "--ocr.resume=true", f"--output_dir={cut}"])  # the last wins
+    assert sorted(p.stat().st_mtime_ns for p in (cut / "batches").iterdir()) == before
+    simulated.clear()
+    assert main(["eval", *common, "--ocr.resume=false", f"--output_dir={cut}"]) == 0
+    assert len(simulated) == 3
+    with pytest.raises(ValueError, match="--ocr.resume must be true or false"):
+        main(["eval", *common, "--ocr.resume=yes", f"--output_dir={cut}"])
+    with pytest.raises(ValueError, match="cannot be combined with --eval.recording=true"):
+        main(["eval", *common, "--ocr.resume=true", "--eval.recording=true", f"--output_dir={cut}"])

@@ -217,6 +217,7 @@ def format_start_split(rows: dict[str, dict]) -> str:
 # `--ocr.<flag>=N`: ours, not passed to lerobot-eval; kept in episodes.json
 OCR_FLAGS = ("step_budget", "decision_budget", "recovery_call_steps")
 VIDEOS_FLAG = "videos"  # `--ocr.videos=N`: episodes rendered into videos (lerobot-eval's own: 10)
+RESUME_FLAG = "resume"  # `--ocr.resume=true`: replay the batches an interrupted run recorded (eval_resume)
 
 
 def _ocr_int(args: list[str], flag: str, minimum: int) -> int | None:
@@ -250,25 +251,43 @@ def run_eval(args: list[str]) -> dict:
     `--ocr.videos=N`: render only the first N episodes into videos (lerobot-eval renders 10, none with
     `--eval.recording=true`; with sync envs, rendering a batch's 10 envs every step costs more than
     simulating them, see RESULTS.md "Eval cell time"; async envs render every env whenever one is asked).
+    Every finished batch is recorded in `<output_dir>/batches/` (`eval_resume`); `--ocr.resume=true`
+    replays those of an interrupted run with the same arguments and checkpoint and runs the rest, with
+    the same episodes as one uninterrupted run. The videos are then the ones the first run rendered.
 
     Raises:
         ValueError: no `--output_dir=` among `args`, an `--ocr.` budget or `--ocr.recovery_call_steps`
-            that is not an integer >= 1, or `--ocr.videos` not an integer >= 0.
+            that is not an integer >= 1, `--ocr.videos` not an integer >= 0, `--ocr.resume` not true or
+            false or combined with `--eval.recording=true`, or resuming into an `--output_dir` whose
+            batches belong to another run.
     """
     from lerobot.scripts import lerobot_eval
 
+    from lerobot_ocr.eval_resume import BatchRecords, run_key
     from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
 
     budgets = {flag: n for flag in OCR_FLAGS if (n := _ocr_int(args, flag, minimum=1)) is not None}
     videos = _ocr_int(args, VIDEOS_FLAG, minimum=0)
-    ours = (*OCR_FLAGS, VIDEOS_FLAG)
+    resume = _arg(args, f"ocr.{RESUME_FLAG}") or "false"
+    if resume not in ("true", "false"):
+        raise ValueError(f"--ocr.{RESUME_FLAG} must be true or false, got {resume!r}.")
+    if resume == "true" and _arg(args, "eval.recording") == "true":
+        raise ValueError(
+            "--ocr.resume=true cannot be combined with --eval.recording=true: replayed batches would not be "
+            "recorded again. Record in a fresh run."
+        )
+    ours = (*OCR_FLAGS, VIDEOS_FLAG, RESUME_FLAG)
     unknown = [a for a in args if a.startswith("--ocr.") and a.split("=")[0][len("--ocr.") :] not in ours]
     if unknown:
         raise ValueError(f"Unknown flag(s) {unknown}; ours are {[f'--ocr.{f}' for f in ours]}.")
+    key = run_key(args)
     args = [a for a in args if not a.startswith("--ocr.")]
     output_dir = _arg(args, "output_dir")
     if output_dir is None:
         raise ValueError("Pass --output_dir=… so that the results can be found.")
+    records = BatchRecords(output_dir, key, resume=resume == "true")
+    if records.n_found:
+        print(f"Resuming: {records.n_found} finished batch(es) replayed from {records.dir}", flush=True)
     policies: list[OcrJointPolicy] = []
     original_reset = OcrJointPolicy.reset
 
@@ -284,8 +303,18 @@ def run_eval(args: list[str]) -> dict:
 
     def rollout(*a, **kw):
         policy = kw.get("policy", a[1] if len(a) > 1 else None)
-        chunk_steps.append(getattr(getattr(policy, "config", None), "n_action_steps", None))
-        data = original_rollout(*a, **kw)
+        k = len(dones)  # this batch's index
+        if k < records.n_found:  # recorded by an interrupted run: replay it, RNGs as it left them
+            data, stats, steps = records.load(k)
+            policy.reset()  # as the rollout would (registers an ocr_joint policy, archives nothing yet)
+            if stats is not None:
+                policy.completed_stats.append(stats)
+        else:
+            steps = getattr(getattr(policy, "config", None), "n_action_steps", None)
+            data = original_rollout(*a, **kw)
+            stats = policy.ocr_stats() if isinstance(policy, OcrJointPolicy) else None
+            records.save(k, data, stats, steps)
+        chunk_steps.append(steps)
         dones.append(data["done"].cpu().numpy())
         successes.append(data["success"].cpu().numpy())
         return data
@@ -295,6 +324,8 @@ def run_eval(args: list[str]) -> dict:
     def eval_policy_all(*a, **kw):
         if videos is not None and kw.get("max_episodes_rendered", 0) > 0:
             kw["max_episodes_rendered"] = videos
+        if records.n_found:  # the first run rendered; a live batch would number its videos from 0 again
+            kw["max_episodes_rendered"] = 0
         return original_eval_all(*a, **kw)
 
     OcrJointPolicy.reset = reset

@@ -250,6 +250,7 @@ def eval_args(
         # CPU: one process; ten worker processes took 1.3x as long on 2 cores (RESULTS.md "Eval cell time").
         f"--eval.use_async_envs={'true' if p['device'] != 'cpu' else 'false'}",
         "--ocr.videos=1",  # the pictures keep episode 0's; rendering 10 sync envs costs more than their sim
+        "--ocr.resume=true",  # an interrupted cell goes on from its last finished batch (`clear_for_resume`)
         *task.eval_overrides,
         *([f"--env.episode_length={length}"] if length else []),
         *([f"--ocr.step_budget={task.step_budget}"] if task.step_budget else []),
@@ -259,19 +260,35 @@ def eval_args(
     ]
 
 
+def clear_for_resume(out: Path, cmd: list[str]) -> int:
+    """Empty `out` for `cmd` (`lerobot-ocr eval … --ocr.resume=true`), keeping only the batches an
+    interrupted run of the same command and checkpoint recorded there (`eval_resume`); returns how many
+    it keeps."""
+    from lerobot_ocr.eval_resume import RECORDS_DIR, recorded_keys, run_key
+
+    records = out / RECORDS_DIR
+    keep = records.is_dir() and recorded_keys(out) == {run_key(cmd[2:])}
+    for f in out.iterdir() if out.is_dir() else ():
+        if not (keep and f == records):
+            shutil.rmtree(f) if f.is_dir() else f.unlink()
+    return len(list(records.glob("batch_*.npz"))) if keep else 0
+
+
 def evaluate_cell(
     task: Task, policy: Path, region: str, p: dict, out: Path, log: Path, env_args: list[str] = ()
 ) -> dict:
-    """Run one cell (`eval_args`) into a fresh `out` and return its summary (`eval_report.summarize` of
-    `eval_info.json`, plus `ocr_stats.json` / `episodes.json` where the run wrote them).
+    """Run one cell (`eval_args`) into `out` and return its summary (`eval_report.summarize` of
+    `eval_info.json`, plus `ocr_stats.json` / `episodes.json` where the run wrote them). An interrupted
+    cell goes on from its last finished batch (`clear_for_resume`); anything else in `out` is removed.
 
     Raises:
         RuntimeError: the eval failed (see `run`).
     """
     from lerobot_ocr.eval_report import summarize
 
-    shutil.rmtree(out, ignore_errors=True)
-    run(eval_args(task, policy, region, p, out, env_args), log)
+    cmd = eval_args(task, policy, region, p, out, env_args)
+    clear_for_resume(out, cmd)
+    run(cmd, log)
     read = (
         json.loads((out / f).read_text()) if (out / f).exists() else None
         for f in ("eval_info.json", "ocr_stats.json", "episodes.json")

@@ -1,0 +1,82 @@
+"""Per-batch eval records (`lerobot_ocr.eval_resume`) and the pipeline's use of them (`clear_for_resume`)."""
+
+import json
+import random
+
+import numpy as np
+import pytest
+import torch
+
+from lerobot_ocr.eval_resume import BatchRecords, recorded_keys, run_key
+from lerobot_ocr.pipeline import clear_for_resume
+
+
+def rollout(b=2, t=5):
+    return {
+        "action": torch.randn(b, t, 2),
+        "reward": torch.rand(b, t),
+        "success": torch.zeros(b, t, dtype=torch.bool),
+        "done": torch.ones(b, t, dtype=torch.bool),
+    }
+
+
+def test_a_record_gives_back_the_batch_and_the_rng_states_after_it(tmp_path):
+    records = BatchRecords(tmp_path, "k", resume=False)
+    data = rollout()
+    modes = np.array([[True, False], [False, False]])
+    stats = {"steps": 2, "threshold": 0.5, "started_ood": [True, False], "in_recovery": modes,
+             "score": modes * 1.0, "decisions": None}  # fmt: skip
+    records.save(0, {**data, "observation": {"x": torch.zeros(1)}}, stats, chunk_steps=8)
+    after = (torch.rand(3), np.random.rand(3), random.random())  # what the run drew next
+    torch.manual_seed(123), np.random.seed(5), random.seed(9)  # a new process seeds differently
+    back, stats_back, steps = BatchRecords(tmp_path, "k", resume=True).load(0)
+    assert (torch.rand(3).tolist(), np.random.rand(3).tolist(), random.random()) == (
+        after[0].tolist(), after[1].tolist(), after[2]
+    )  # fmt: skip
+    assert set(back) == set(data) and steps == 8  # observations are not kept
+    for name, t in data.items():
+        assert back[name].dtype == t.dtype and torch.equal(back[name], t)
+    np.testing.assert_array_equal(stats_back["in_recovery"], modes)
+    assert stats_back["decisions"] is None and stats_back["started_ood"] == [True, False]
+
+
+def test_only_a_gapless_prefix_is_replayed_and_other_runs_are_refused_or_cleared(tmp_path):
+    records = BatchRecords(tmp_path, "k", resume=False)
+    for k in (0, 1, 3):
+        records.save(k, rollout(), None, None)
+    assert BatchRecords(tmp_path, "k", resume=True).n_found == 2  # batch 2 is missing: 3 runs again
+    with pytest.raises(ValueError, match="another run"):
+        BatchRecords(tmp_path, "other", resume=True)
+    assert recorded_keys(tmp_path) == {"k"}  # refused, left in place
+    assert BatchRecords(tmp_path, "other", resume=False).n_found == 0
+    assert recorded_keys(tmp_path) == set()
+
+
+def test_the_key_follows_the_checkpoint_bytes_and_the_episode_flags_only(tmp_path):
+    ckpt = tmp_path / "ckpt"
+    ckpt.mkdir()
+    (ckpt / "model.safetensors").write_bytes(b"weights")
+    args = [f"--policy.path={ckpt}", "--seed=1", "--eval.n_episodes=10", f"--output_dir={tmp_path / 'a'}"]
+    key = run_key(args)
+    same = [f"--policy.path={ckpt}", "--seed=1", "--eval.n_episodes=20", f"--output_dir={tmp_path / 'b'}",
+            "--ocr.videos=0", "--ocr.resume=true"]  # fmt: skip
+    assert run_key(same) == key  # more episodes, another folder, videos, resuming: the same batches
+    assert run_key([*args, "--seed=2"]) != key
+    (ckpt / "model.safetensors").write_bytes(b"retrained")
+    assert run_key(args) != key
+
+
+def test_a_cell_keeps_only_the_batches_of_its_own_command(tmp_path):
+    ckpt, out = tmp_path / "ckpt", tmp_path / "cell"
+    ckpt.mkdir()
+    (ckpt / "config.json").write_text(json.dumps({"type": "diffusion"}))
+    cmd = ["lerobot-ocr", "eval", f"--policy.path={ckpt}", "--seed=100000", f"--output_dir={out}",
+           "--ocr.resume=true"]  # fmt: skip
+    BatchRecords(out, run_key(cmd[2:]), resume=False).save(0, rollout(), None, None)
+    (out / "eval_info.json").write_text("{}")  # a finished run's results, or a crashed run's leftovers
+    (out / "videos").mkdir()
+    assert clear_for_resume(out, cmd) == 1
+    assert [f.name for f in out.iterdir()] == ["batches"]
+    assert clear_for_resume(out, [*cmd, "--policy.some_change=1"]) == 0  # another command: start over
+    assert list(out.iterdir()) == []
+    assert clear_for_resume(tmp_path / "new", cmd) == 0

@@ -26,30 +26,62 @@ def test_a_record_gives_back_the_batch_and_the_rng_states_after_it(tmp_path):
     modes = np.array([[True, False], [False, False]])
     stats = {"steps": 2, "threshold": 0.5, "started_ood": [True, False], "in_recovery": modes,
              "score": modes * 1.0, "decisions": None}  # fmt: skip
-    records.save(0, {**data, "observation": {"x": torch.zeros(1)}}, stats, chunk_steps=8)
+    records.save(0, {**data, "observation": {"x": torch.zeros(1)}}, stats, 8, seeds=[3, 4], seconds=1.5)
     after = (torch.rand(3), np.random.rand(3), random.random())  # what the run drew next
     torch.manual_seed(123), np.random.seed(5), random.seed(9)  # a new process seeds differently
-    back, stats_back, steps = BatchRecords(tmp_path, "k", resume=True).load(0)
+    resumed = BatchRecords(tmp_path, "k", resume=True)
+    with pytest.raises(ValueError, match="ran env seeds"):
+        resumed.load(0, seeds=[3])  # lerobot-eval shrank the batch: other seeds
+    back, stats_back, steps = resumed.load(0, seeds=range(3, 5))
     assert (torch.rand(3).tolist(), np.random.rand(3).tolist(), random.random()) == (
         after[0].tolist(), after[1].tolist(), after[2]
     )  # fmt: skip
     assert set(back) == set(data) and steps == 8  # observations are not kept
+    assert resumed.metas[0]["seconds"] == 1.5 and resumed.metas[0]["rows"] == 2
     for name, t in data.items():
         assert back[name].dtype == t.dtype and torch.equal(back[name], t)
     np.testing.assert_array_equal(stats_back["in_recovery"], modes)
     assert stats_back["decisions"] is None and stats_back["started_ood"] == [True, False]
 
 
-def test_only_a_gapless_prefix_is_replayed_and_other_runs_are_refused_or_cleared(tmp_path):
+def save(records, k, rows=2):
+    records.save(k, rollout(b=rows), None, None, seeds=list(range(rows * k, rows * (k + 1))), seconds=1.0)
+
+
+def test_only_a_readable_gapless_prefix_is_replayed_and_other_runs_are_refused_or_cleared(tmp_path):
     records = BatchRecords(tmp_path, "k", resume=False)
     for k in (0, 1, 3):
-        records.save(k, rollout(), None, None)
-    assert BatchRecords(tmp_path, "k", resume=True).n_found == 2  # batch 2 is missing: 3 runs again
+        save(records, k)
+    resumed = BatchRecords(tmp_path, "k", resume=True)
+    assert resumed.n_found == 2 and [resumed.replays(k) for k in range(4)] == [True, True, False, False]
+    assert not (tmp_path / "batches" / "batch_00003.npz").exists()  # after a gap: runs again
+    save(records, 2)
+    path = tmp_path / "batches" / "batch_00001.npz"
+    path.write_bytes(path.read_bytes()[:100])  # cut short by a crash of the machine
+    assert BatchRecords(tmp_path, "k", resume=True).n_found == 1
+    assert sorted(f.name for f in (tmp_path / "batches").iterdir()) == ["batch_00000.npz"]
     with pytest.raises(ValueError, match="another run"):
         BatchRecords(tmp_path, "other", resume=True)
     assert recorded_keys(tmp_path) == {"k"}  # refused, left in place
     assert BatchRecords(tmp_path, "other", resume=False).n_found == 0
     assert recorded_keys(tmp_path) == set()
+
+
+def test_videos_are_rendered_again_unless_every_rendered_episode_has_one(tmp_path):
+    records = BatchRecords(tmp_path, "k", resume=False)
+    for k in range(3):
+        save(records, k)
+    videos = tmp_path / "videos" / "pusht_ocr_0"
+    resumed = BatchRecords(tmp_path, "k", resume=True)
+    assert resumed.render_again(tmp_path / "videos", 3) and resumed.live_until == 2  # none yet: 2 batches
+    videos.mkdir(parents=True)
+    for i in range(3):
+        (videos / f"eval_episode_{i}.mp4").write_bytes(b"" if i == 2 else b"mp4")
+    assert resumed.render_again(tmp_path / "videos", 3)  # an empty file: cut while writing it
+    assert not resumed.render_again(tmp_path / "videos", 2) and resumed.live_until == 0
+    assert [resumed.replays(k) for k in range(4)] == [True, True, True, False]
+    assert resumed.render_again(tmp_path / "videos", 7) and resumed.live_until == 3  # past the records
+    assert not resumed.render_again(tmp_path / "videos", 0)
 
 
 def test_the_key_follows_the_checkpoint_bytes_and_the_episode_flags_only(tmp_path):
@@ -61,6 +93,7 @@ def test_the_key_follows_the_checkpoint_bytes_and_the_episode_flags_only(tmp_pat
     same = [f"--policy.path={ckpt}", "--seed=1", "--eval.n_episodes=20", f"--output_dir={tmp_path / 'b'}",
             "--ocr.videos=0", "--ocr.resume=true"]  # fmt: skip
     assert run_key(same) == key  # more episodes, another folder, videos, resuming: the same batches
+    assert run_key([*args, "--seed=2", "--seed=1"]) != run_key([*args, "--seed=1", "--seed=2"])  # last wins
     assert run_key([*args, "--seed=2"]) != key
     (ckpt / "model.safetensors").write_bytes(b"retrained")
     assert run_key(args) != key
@@ -72,11 +105,15 @@ def test_a_cell_keeps_only_the_batches_of_its_own_command(tmp_path):
     (ckpt / "config.json").write_text(json.dumps({"type": "diffusion"}))
     cmd = ["lerobot-ocr", "eval", f"--policy.path={ckpt}", "--seed=100000", f"--output_dir={out}",
            "--ocr.resume=true"]  # fmt: skip
-    BatchRecords(out, run_key(cmd[2:]), resume=False).save(0, rollout(), None, None)
-    (out / "eval_info.json").write_text("{}")  # a finished run's results, or a crashed run's leftovers
+    save(BatchRecords(out, run_key(cmd[2:]), resume=False), 0)
     (out / "videos").mkdir()
+    (out / "eval.log").write_text("a cut run's leftovers")
     assert clear_for_resume(out, cmd) == 1
-    assert [f.name for f in out.iterdir()] == ["batches"]
+    assert sorted(f.name for f in out.iterdir()) == ["batches", "videos"]
+    (out / "eval_info.json").write_text("{}")  # a finished run: running its cell again measures again
+    assert clear_for_resume(out, cmd) == 0 and list(out.iterdir()) == []
+    save(BatchRecords(out, run_key(cmd[2:]), resume=False), 0)
+    assert clear_for_resume(out, [*cmd, "--ocr.step_budget=400"]) == 1  # read after the run: same batches
     assert clear_for_resume(out, [*cmd, "--policy.some_change=1"]) == 0  # another command: start over
     assert list(out.iterdir()) == []
     assert clear_for_resume(tmp_path / "new", cmd) == 0

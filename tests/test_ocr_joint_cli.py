@@ -163,22 +163,44 @@ def test_an_interrupted_eval_resumes_with_the_episodes_of_one_run(
     assert main(["eval", *common, f"--output_dir={whole}"]) == 0
     assert len(simulated) == 3 and len(list((whole / "batches").glob("batch_*.npz"))) == 3
 
-    # a run that died during its third batch: two records, no results yet
-    (cut / "batches").mkdir(parents=True)
-    for k in (0, 1):
-        shutil.copy(whole / "batches" / f"batch_0000{k}.npz", cut / "batches")
-    simulated.clear()
-    assert main(["eval", *common, "--ocr.resume=true", f"--output_dir={cut}"]) == 0
+    # a run that died during its third batch: two records (and its video, or not yet), no results
+    def resume(name, with_videos):
+        cut = tmp_path / name
+        (cut / "batches").mkdir(parents=True)
+        for k in (0, 1):
+            shutil.copy(whole / "batches" / f"batch_0000{k}.npz", cut / "batches")
+        if with_videos:
+            shutil.copytree(whole / "videos", cut / "videos")
+        simulated.clear()
+        assert main(["eval", *common, "--ocr.resume=true", f"--output_dir={cut}"]) == 0
+        return cut
+
+    cut = resume("cut", with_videos=True)
     assert simulated == [[11, 12]]  # only the third batch ran, with its own seeds
     files = ["episodes.json", *(["ocr_stats.json"] if joint else [])]
     for name in files:
-        assert json.loads((cut / name).read_text()) == json.loads((whole / name).read_text()), name
+        resumed, one_run = (json.loads((d / name).read_text()) for d in (cut, whole))
+        assert resumed.pop("replayed_batches", 2) == 2 and resumed.pop("replayed_seconds", 1) > 0
+        assert resumed == one_run, name
     metrics = [json.loads((d / "eval_info.json").read_text())["per_task"][0]["metrics"] for d in (whole, cut)]
     for k in ("successes", "sum_rewards", "max_rewards"):
         assert metrics[0][k] == metrics[1][k] and len(metrics[0][k]) == 6
     # the T rarely moves in 10 steps, so compare what the policy did: its sampled actions, bit for bit
     third = [np.load(d / "batches" / "batch_00002.npz")["rollout.action"] for d in (whole, cut)]
     np.testing.assert_array_equal(third[0], third[1])
+
+    # cut before its video was written: the rendered batch runs again (and renders), the next is replayed
+    no_video = resume("cut_no_video", with_videos=False)
+    assert simulated == [[7, 8], [11, 12]]
+    assert len(list((no_video / "videos").rglob("eval_episode_0.mp4"))) == 1
+    resumed, one_run = (json.loads((d / "episodes.json").read_text()) for d in (no_video, whole))
+    assert resumed.pop("replayed_batches") == 1 and resumed.pop("replayed_seconds") > 0 and resumed == one_run
+    third = [np.load(d / "batches" / "batch_00002.npz")["rollout.action"] for d in (whole, no_video)]
+    np.testing.assert_array_equal(third[0], third[1])
+
+    # fewer episodes than the batch size: lerobot-eval shrinks the batch, so batch 0 gets other seeds
+    with pytest.raises(ValueError, match="ran env seeds"):
+        main(["eval", *common, "--eval.n_episodes=1", "--ocr.resume=true", f"--output_dir={no_video}"])
 
     # batches of another run (another seed) are refused and left alone; without resume they are replaced
     before = sorted(p.stat().st_mtime_ns for p in (cut / "batches").iterdir())

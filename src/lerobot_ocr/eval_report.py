@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -141,6 +142,10 @@ def summarize(eval_info: dict, ocr: dict | None, episodes: dict | None = None) -
         "avg_max_reward": eval_info["overall"]["avg_max_reward"],
         "eval_s": eval_info["overall"].get("eval_s"),
     }
+    if episodes is not None and episodes.get("replayed_batches") and out["eval_s"] is not None:
+        # a resumed run: its batches' time when they ran, the replayed ones included
+        out["eval_s"] += episodes["replayed_seconds"]
+        out["replayed_batches"] = episodes["replayed_batches"]
     if episodes is not None and n and len(episodes["success_step"]) >= n:
         budgets = budget_success(episodes, n)
         if budgets:
@@ -252,14 +257,16 @@ def run_eval(args: list[str]) -> dict:
     `--eval.recording=true`; with sync envs, rendering a batch's 10 envs every step costs more than
     simulating them, see RESULTS.md "Eval cell time"; async envs render every env whenever one is asked).
     Every finished batch is recorded in `<output_dir>/batches/` (`eval_resume`); `--ocr.resume=true`
-    replays those of an interrupted run with the same arguments and checkpoint and runs the rest, with
-    the same episodes as one uninterrupted run. The videos are then the ones the first run rendered.
+    replays those of an interrupted run with the same arguments, checkpoint and code, and runs the rest,
+    with the same episodes as one uninterrupted run (on CPU); batches whose videos are missing run again.
+    `eval_s` then adds the replayed batches' recorded time (`replayed_batches` says how many).
 
     Raises:
         ValueError: no `--output_dir=` among `args`, an `--ocr.` budget or `--ocr.recovery_call_steps`
             that is not an integer >= 1, `--ocr.videos` not an integer >= 0, `--ocr.resume` not true or
-            false or combined with `--eval.recording=true`, or resuming into an `--output_dir` whose
-            batches belong to another run.
+            false or combined with `--eval.recording=true` or `--env.max_parallel_tasks` > 1, or resuming
+            into an `--output_dir` whose batches belong to another run, with other seeds per batch (another
+            batch size), or on a multi-task env.
     """
     from lerobot.scripts import lerobot_eval
 
@@ -285,9 +292,12 @@ def run_eval(args: list[str]) -> dict:
     output_dir = _arg(args, "output_dir")
     if output_dir is None:
         raise ValueError("Pass --output_dir=… so that the results can be found.")
+    if resume == "true" and int(_arg(args, "env.max_parallel_tasks") or 1) > 1:
+        raise ValueError(
+            "--ocr.resume=true needs tasks evaluated one after another (--env.max_parallel_tasks=1): "
+            "batches of tasks run in parallel threads have no fixed order to replay."
+        )
     records = BatchRecords(output_dir, key, resume=resume == "true")
-    if records.n_found:
-        print(f"Resuming: {records.n_found} finished batch(es) replayed from {records.dir}", flush=True)
     policies: list[OcrJointPolicy] = []
     original_reset = OcrJointPolicy.reset
 
@@ -301,19 +311,23 @@ def run_eval(args: list[str]) -> dict:
     chunk_steps: list[int | None] = []  # actions per decision of a (non-ocr_joint) chunking policy
     original_rollout = lerobot_eval.rollout
 
+    replayed_seconds = []  # what the replayed batches took when they ran
+
     def rollout(*a, **kw):
         policy = kw.get("policy", a[1] if len(a) > 1 else None)
-        k = len(dones)  # this batch's index
-        if k < records.n_found:  # recorded by an interrupted run: replay it, RNGs as it left them
-            data, stats, steps = records.load(k)
+        k = len(dones)  # this batch's index (tasks run one after another)
+        if records.replays(k):  # recorded by an interrupted run: replay it, RNGs as it left them
+            data, stats, steps = records.load(k, kw.get("seeds"))
             policy.reset()  # as the rollout would (registers an ocr_joint policy, archives nothing yet)
             if stats is not None:
                 policy.completed_stats.append(stats)
+            replayed_seconds.append(records.metas[k]["seconds"])
         else:
             steps = getattr(getattr(policy, "config", None), "n_action_steps", None)
+            start = time.perf_counter()
             data = original_rollout(*a, **kw)
             stats = policy.ocr_stats() if isinstance(policy, OcrJointPolicy) else None
-            records.save(k, data, stats, steps)
+            records.save(k, data, stats, steps, kw.get("seeds"), time.perf_counter() - start)
         chunk_steps.append(steps)
         dones.append(data["done"].cpu().numpy())
         successes.append(data["success"].cpu().numpy())
@@ -324,8 +338,18 @@ def run_eval(args: list[str]) -> dict:
     def eval_policy_all(*a, **kw):
         if videos is not None and kw.get("max_episodes_rendered", 0) > 0:
             kw["max_episodes_rendered"] = videos
-        if records.n_found:  # the first run rendered; a live batch would number its videos from 0 again
-            kw["max_episodes_rendered"] = 0
+        envs = kw.get("envs") or {}
+        if records.n_found and sum(len(tasks) for tasks in envs.values()) > 1:
+            raise ValueError(
+                "--ocr.resume=true replays single-task envs only (this env has several tasks, each numbering "
+                "its episodes and videos from 0); start over without it."
+            )
+        rendered = kw.get("max_episodes_rendered", 0)
+        if records.n_found and not records.render_again(kw.get("videos_dir"), rendered):
+            kw["max_episodes_rendered"] = 0  # the interrupted run rendered them all
+        if records.n_found:
+            replay = records.n_found - records.live_until
+            print(f"Resuming: {replay} recorded batch(es) replayed from {records.dir}", flush=True)
         return original_eval_all(*a, **kw)
 
     OcrJointPolicy.reset = reset
@@ -369,6 +393,8 @@ def run_eval(args: list[str]) -> dict:
         }
         (Path(output_dir) / "ocr_stats.json").write_text(json.dumps(ocr, indent=2))
     episodes = {"success_step": [], "decisions_at_success": [], **budgets}
+    if replayed_seconds:  # eval_info's eval_s counts this process only
+        episodes.update(replayed_batches=len(replayed_seconds), replayed_seconds=sum(replayed_seconds))
     joint = len(batches) == len(successes) and all(
         b.get("decisions") is not None and b["decisions"].shape == s.shape[::-1]
         for b, s in zip(batches, successes)

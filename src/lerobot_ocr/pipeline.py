@@ -261,15 +261,20 @@ def eval_args(
 
 
 def clear_for_resume(out: Path, cmd: list[str]) -> int:
-    """Empty `out` for `cmd` (`lerobot-ocr eval … --ocr.resume=true`), keeping only the batches an
-    interrupted run of the same command and checkpoint recorded there (`eval_resume`); returns how many
-    it keeps."""
+    """Prepare `out` for `cmd` (`lerobot-ocr eval … --ocr.resume=true`): keep what an interrupted run of
+    the same command and checkpoint left (its batch records and videos, `eval_resume`), remove the rest.
+    A finished run (`eval_info.json`) is removed whole: running its cell again means measuring again.
+    Returns the batches kept."""
     from lerobot_ocr.eval_resume import RECORDS_DIR, recorded_keys, run_key
 
     records = out / RECORDS_DIR
-    keep = records.is_dir() and recorded_keys(out) == {run_key(cmd[2:])}
+    keep = (
+        records.is_dir()
+        and not (out / "eval_info.json").exists()
+        and recorded_keys(out) == {run_key(cmd[2:])}
+    )
     for f in out.iterdir() if out.is_dir() else ():
-        if not (keep and f == records):
+        if not (keep and f.name in (RECORDS_DIR, "videos")):
             shutil.rmtree(f) if f.is_dir() else f.unlink()
     return len(list(records.glob("batch_*.npz"))) if keep else 0
 

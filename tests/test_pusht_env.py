@@ -120,3 +120,30 @@ def test_lerobot_eval_runs_a_random_diffusion_policy_on_ood_starts(tmp_path):
     assert res.returncode == 0, res.stderr[-3000:]
     info = json.loads((out / "eval_info.json").read_text())
     assert info["overall"]["n_episodes"] == 1
+
+
+def test_a_finished_env_of_a_vector_env_stays_frozen_until_the_next_rollout():
+    """lerobot-eval steps a batch until its last episode ends; a finished env must not reset and simulate
+    an episode nobody reads (LeRobot's FreezeAfterEpisodeEnd), and a new rollout's reset thaws it."""
+    from lerobot.envs.utils import NEW_ROLLOUT_OPTION
+
+    from lerobot_ocr.envs.configs import PushtOcrEnvConfig
+
+    env = PushtOcrEnvConfig(region="ood", obs_type="environment_state_agent_pos", episode_length=3)
+    vec = env.create_envs(n_envs=2)["pusht_ocr"][0]
+    try:
+        vec.reset(seed=[0, 1], options={NEW_ROLLOUT_OPTION: True})
+        action = np.full((2, 2), 256.0, dtype=np.float32)
+        for _ in range(3):
+            obs, reward, terminated, truncated, _ = vec.step(action)
+        assert truncated.all()  # the episode cap
+        last = obs["object_pose"].copy()
+        obs, reward, terminated, truncated, _ = vec.step(np.zeros((2, 2), dtype=np.float32))
+        np.testing.assert_array_equal(obs["object_pose"], last)  # not an autoreset start
+        assert (reward == 0).all() and truncated.all()
+        fresh, _ = vec.reset(seed=[5, 6], options={NEW_ROLLOUT_OPTION: True})
+        single = make_pusht_ocr_env(region="ood", obs_type="environment_state_agent_pos")
+        np.testing.assert_array_equal(fresh["object_pose"][0], single.reset(seed=5)[0]["object_pose"])
+        single.close()
+    finally:
+        vec.close()

@@ -15,11 +15,17 @@ from lerobot_ocr.envs.regions import REGIONS, NutStartRegions
 
 
 def _vector_env(factory, n_envs: int, use_async_envs: bool) -> gym.vector.VectorEnv:
+    """`n_envs` envs from `factory`, each frozen once its episode ends (LeRobot's
+    `FreezeAfterEpisodeEnd`): lerobot-eval steps a batch until its last episode ends, and without it a
+    finished env resets and simulates an episode nobody reads (RESULTS.md "Eval cell time")."""
+    from lerobot.envs.utils import freeze_after_episode_end
+
     if use_async_envs and n_envs > 1:
         vec_cls, extra = gym.vector.AsyncVectorEnv, {"context": "forkserver"}
     else:
         vec_cls, extra = gym.vector.SyncVectorEnv, {}
-    return vec_cls([factory] * n_envs, autoreset_mode=gym.vector.AutoresetMode.SAME_STEP, **extra)
+    factories = [freeze_after_episode_end(factory) for _ in range(n_envs)]
+    return vec_cls(factories, autoreset_mode=gym.vector.AutoresetMode.SAME_STEP, **extra)
 
 
 def _make_pusht_ocr(kwargs: dict):

@@ -67,21 +67,53 @@ def test_only_a_readable_gapless_prefix_is_replayed_and_other_runs_are_refused_o
     assert recorded_keys(tmp_path) == set()
 
 
-def test_videos_are_rendered_again_unless_every_rendered_episode_has_one(tmp_path):
+def write_mp4(path, frames=5):
+    import av
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with av.open(str(path), "w") as container:
+        stream = container.add_stream("libx264", rate=10)
+        stream.width = stream.height = 16
+        stream.pix_fmt = "yuv420p"
+        for i in range(frames):
+            frame = av.VideoFrame.from_ndarray(np.full((16, 16, 3), 20 * i, np.uint8), format="rgb24")
+            container.mux(stream.encode(frame))
+        container.mux(stream.encode())
+
+
+def test_videos_are_rendered_again_unless_every_rendered_episode_has_a_whole_one(tmp_path):
     records = BatchRecords(tmp_path, "k", resume=False)
     for k in range(3):
         save(records, k)
     videos = tmp_path / "videos" / "pusht_ocr_0"
     resumed = BatchRecords(tmp_path, "k", resume=True)
     assert resumed.render_again(tmp_path / "videos", 3) and resumed.live_until == 2  # none yet: 2 batches
-    videos.mkdir(parents=True)
     for i in range(3):
-        (videos / f"eval_episode_{i}.mp4").write_bytes(b"" if i == 2 else b"mp4")
-    assert resumed.render_again(tmp_path / "videos", 3)  # an empty file: cut while writing it
+        write_mp4(videos / f"eval_episode_{i}.mp4")
+    cut = videos / "eval_episode_2.mp4"
+    cut.write_bytes(cut.read_bytes()[: cut.stat().st_size // 2])  # cut while being written: no index
+    assert resumed.render_again(tmp_path / "videos", 3)
     assert not resumed.render_again(tmp_path / "videos", 2) and resumed.live_until == 0
     assert [resumed.replays(k) for k in range(4)] == [True, True, True, False]
     assert resumed.render_again(tmp_path / "videos", 7) and resumed.live_until == 3  # past the records
     assert not resumed.render_again(tmp_path / "videos", 0)
+    BatchRecords(tmp_path, "k", resume=False)  # a fresh run: earlier videos go with earlier records
+    assert not list(videos.iterdir())
+
+
+def test_every_recorded_batch_must_have_run_the_seeds_this_run_gives_it(tmp_path):
+    records = BatchRecords(tmp_path, "k", resume=False)
+    for k in range(2):
+        save(records, k)  # seeds 0, 1 then 2, 3
+    resumed = BatchRecords(tmp_path, "k", resume=True)
+    resumed.check_seeds(0, rows=2)
+    with pytest.raises(ValueError, match=r"Batch 0 .* ran env seeds \[0, 1\], this run gives it \[0\]"):
+        resumed.check_seeds(0, rows=1)  # lerobot-eval shrank the batch
+    with pytest.raises(ValueError, match="ran env seeds"):
+        resumed.check_seeds(100, rows=2)
+    with pytest.raises(ValueError, match="needs seeded episodes"):
+        resumed.check_seeds(None, rows=2)
+    BatchRecords(tmp_path / "none", "k", resume=True).check_seeds(None, rows=2)  # nothing to replay
 
 
 def test_the_key_follows_the_checkpoint_bytes_and_the_episode_flags_only(tmp_path):
@@ -93,6 +125,13 @@ def test_the_key_follows_the_checkpoint_bytes_and_the_episode_flags_only(tmp_pat
     same = [f"--policy.path={ckpt}", "--seed=1", "--eval.n_episodes=20", f"--output_dir={tmp_path / 'b'}",
             "--ocr.videos=0", "--ocr.resume=true"]  # fmt: skip
     assert run_key(same) == key  # more episodes, another folder, videos, resuming: the same batches
+    spaced = [a.replace("=", " ", 1).split(" ") for a in args]
+    assert run_key([x for pair in spaced for x in pair]) == key  # `--flag value` is `--flag=value`
+    config = tmp_path / "eval.json"
+    config.write_text('{"seed": 1}')
+    with_config = run_key([*args, f"--config_path={config}"])
+    config.write_text('{"seed": 2}')
+    assert run_key([*args, f"--config_path={config}"]) != with_config  # the file's contents count
     assert run_key([*args, "--seed=2", "--seed=1"]) != run_key([*args, "--seed=1", "--seed=2"])  # last wins
     assert run_key([*args, "--seed=2"]) != key
     (ckpt / "model.safetensors").write_bytes(b"retrained")
@@ -104,7 +143,7 @@ def test_a_cell_keeps_only_the_batches_of_its_own_command(tmp_path):
     ckpt.mkdir()
     (ckpt / "config.json").write_text(json.dumps({"type": "diffusion"}))
     cmd = ["lerobot-ocr", "eval", f"--policy.path={ckpt}", "--seed=100000", f"--output_dir={out}",
-           "--ocr.resume=true"]  # fmt: skip
+           "--eval.batch_size=2", "--eval.n_episodes=4", "--ocr.resume=true"]  # fmt: skip
     save(BatchRecords(out, run_key(cmd[2:]), resume=False), 0)
     (out / "videos").mkdir()
     (out / "eval.log").write_text("a cut run's leftovers")
@@ -114,6 +153,8 @@ def test_a_cell_keeps_only_the_batches_of_its_own_command(tmp_path):
     assert clear_for_resume(out, cmd) == 0 and list(out.iterdir()) == []
     save(BatchRecords(out, run_key(cmd[2:]), resume=False), 0)
     assert clear_for_resume(out, [*cmd, "--ocr.step_budget=400"]) == 1  # read after the run: same batches
+    assert clear_for_resume(out, [*cmd, "--eval.n_episodes=1"]) == 0  # lerobot-eval would shrink the batch
+    save(BatchRecords(out, run_key(cmd[2:]), resume=False), 0)
     assert clear_for_resume(out, [*cmd, "--policy.some_change=1"]) == 0  # another command: start over
     assert list(out.iterdir()) == []
     assert clear_for_resume(tmp_path / "new", cmd) == 0

@@ -135,8 +135,10 @@ def test_a_finished_env_of_a_vector_env_stays_frozen_until_the_next_rollout():
         vec.reset(seed=[0, 1], options={NEW_ROLLOUT_OPTION: True})
         action = np.full((2, 2), 256.0, dtype=np.float32)
         for _ in range(3):
-            obs, reward, terminated, truncated, _ = vec.step(action)
+            obs, reward, terminated, truncated, info = vec.step(action)
         assert truncated.all()  # the episode cap
+        for i in range(2):  # the same step returns the terminal observation, not an autoreset start
+            np.testing.assert_array_equal(obs["object_pose"][i], info["final_obs"][i]["object_pose"])
         last = obs["object_pose"].copy()
         obs, reward, terminated, truncated, _ = vec.step(np.zeros((2, 2), dtype=np.float32))
         np.testing.assert_array_equal(obs["object_pose"], last)  # not an autoreset start

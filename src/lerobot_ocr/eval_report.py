@@ -270,9 +270,10 @@ def run_eval(args: list[str]) -> dict:
     """
     from lerobot.scripts import lerobot_eval
 
-    from lerobot_ocr.eval_resume import BatchRecords, run_key
+    from lerobot_ocr.eval_resume import BatchRecords, joined_args, run_key
     from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
 
+    args = joined_args(args)  # `--flag value` -> `--flag=value`, so that every check below sees it
     budgets = {flag: n for flag in OCR_FLAGS if (n := _ocr_int(args, flag, minimum=1)) is not None}
     videos = _ocr_int(args, VIDEOS_FLAG, minimum=0)
     resume = _arg(args, f"ocr.{RESUME_FLAG}") or "false"
@@ -344,7 +345,10 @@ def run_eval(args: list[str]) -> dict:
                 "--ocr.resume=true replays single-task envs only (this env has several tasks, each numbering "
                 "its episodes and videos from 0); start over without it."
             )
-        rendered = kw.get("max_episodes_rendered", 0)
+        if records.n_found:
+            rows = next(iter(next(iter(envs.values())).values())).num_envs
+            records.check_seeds(kw.get("start_seed"), min(rows, kw["n_episodes"]))
+        rendered = min(kw.get("max_episodes_rendered", 0), kw["n_episodes"])
         if records.n_found and not records.render_again(kw.get("videos_dir"), rendered):
             kw["max_episodes_rendered"] = 0  # the interrupted run rendered them all
         if records.n_found:

@@ -41,26 +41,66 @@ _KEY_IGNORES = (
     "ocr.recovery_call_steps",
 )
 _STATS_ARRAYS = ("score", "in_recovery", "decisions")
+# Bump when a change alters the episodes of the same command (env wrappers, the policy's sampling, the
+# record format): records of older code then start over instead of mixing. 2: finished envs frozen.
+RECORD_VERSION = 2
+
+
+def joined_args(args: list[str]) -> list[str]:
+    """CLI strings with every `--flag value` pair written `--flag=value` (both are valid for draccus), so
+    that one form can be read and hashed."""
+    out, i = [], 0
+    while i < len(args):
+        a = args[i]
+        if a.startswith("--") and "=" not in a and i + 1 < len(args) and not args[i + 1].startswith("--"):
+            out.append(f"{a}={args[i + 1]}")
+            i += 2
+        else:
+            out.append(a)
+            i += 1
+    return out
+
+
+def _hash_files(digest, root: Path) -> None:
+    files = [root] if root.is_file() else sorted(p for p in root.rglob("*") if p.is_file())
+    for f in files:
+        digest.update(str(f.relative_to(root) if f != root else f.name).encode())
+        with open(f, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                digest.update(block)
 
 
 def run_key(args: list[str]) -> str:
-    """The identity of a run's batches: its arguments (those that change episodes) and its checkpoint.
+    """The identity of a run's batches: its arguments (those that change episodes, in order), its
+    checkpoint and config file, `RECORD_VERSION` and LeRobot's version.
 
-    `args`: the eval's CLI strings (`lerobot-ocr eval`'s, ours included). The `--policy.path` folder
-    (the last one given) is hashed file by file (names and bytes: a retrained checkpoint under the same
-    path is another run); a hub id counts as its string.
+    `args`: the eval's CLI strings (`lerobot-ocr eval`'s, ours included; `--flag value` pairs count as
+    `--flag=value`). The `--policy.path` folder (the last one given) is hashed file by file (names and
+    bytes: a retrained checkpoint under the same path is another run), a hub id counts as its string;
+    a `--config_path` file is hashed too. Our own code is not (`RECORD_VERSION` stands for it).
     """
-    kept = [a for a in args if not any(a.startswith(f"--{flag}=") for flag in _KEY_IGNORES)]  # in order
-    digest = hashlib.sha256(json.dumps(kept).encode())
-    paths = [a.split("=", 1)[1] for a in args if a.startswith("--policy.path=")]
-    folder = Path(paths[-1]) if paths else None
-    if folder is not None and folder.is_dir():
-        for f in sorted(p for p in folder.rglob("*") if p.is_file()):
-            digest.update(str(f.relative_to(folder)).encode())
-            with open(f, "rb") as fh:
-                for block in iter(lambda: fh.read(1 << 20), b""):
-                    digest.update(block)
+    from importlib.metadata import version
+
+    args = joined_args(args)
+    kept = [a for a in args if not any(a.startswith(f"--{flag}=") for flag in _KEY_IGNORES)]
+    digest = hashlib.sha256(json.dumps([RECORD_VERSION, version("lerobot"), kept]).encode())
+    for flag in ("policy.path", "config_path"):
+        values = [a.split("=", 1)[1] for a in args if a.startswith(f"--{flag}=")]
+        if values and Path(values[-1]).exists():
+            _hash_files(digest, Path(values[-1]))
     return digest.hexdigest()
+
+
+def video_is_complete(path: Path) -> bool:
+    """Whether `path` is a video that opens and holds frames (one cut while being written has no index)."""
+    import av
+
+    try:
+        with av.open(str(path)) as container:
+            stream = container.streams.video[0]
+            return bool(stream.frames) or any(True for _ in container.decode(stream))
+    except (OSError, IndexError, av.error.FFmpegError):
+        return False
 
 
 def rng_states() -> dict[str, np.ndarray]:
@@ -103,10 +143,16 @@ def _meta(path: Path) -> dict | None:
         return None
 
 
+def recorded_metas(output_dir: str | Path) -> list[dict]:
+    """The metadata of the readable batches recorded in `<output_dir>/batches/` (key, batch, rows, seeds,
+    seconds, ...), in file order."""
+    metas = (_meta(f) for f in sorted((Path(output_dir) / RECORDS_DIR).glob("batch_*.npz")))
+    return [m for m in metas if m is not None]
+
+
 def recorded_keys(output_dir: str | Path) -> set[str]:
     """The `run_key`s of the readable batches recorded in `<output_dir>/batches/` (empty: none)."""
-    metas = (_meta(f) for f in sorted((Path(output_dir) / RECORDS_DIR).glob("batch_*.npz")))
-    return {m["key"] for m in metas if m is not None}
+    return {m["key"] for m in recorded_metas(output_dir)}
 
 
 class BatchRecords:
@@ -124,8 +170,10 @@ class BatchRecords:
 
     def __init__(self, output_dir: str | Path, key: str, resume: bool):
         self.dir, self.key = Path(output_dir) / RECORDS_DIR, key
-        if not resume:
-            for f in self.dir.glob("batch_*.npz"):
+        for f in self.dir.glob(".batch_*.tmp"):  # left by a cut while saving
+            f.unlink()
+        if not resume:  # this run's records and videos replace any earlier run's
+            for f in [*self.dir.glob("batch_*.npz"), *Path(output_dir).glob("videos/*/eval_episode_*.mp4")]:
                 f.unlink()
         elif recorded_keys(output_dir) - {key}:
             raise ValueError(
@@ -143,16 +191,38 @@ class BatchRecords:
                 f.unlink()
         self.live_until = 0  # batches below it run again although recorded (`render_again`)
 
+    def check_seeds(self, start_seed: int | None, rows: int) -> None:
+        """Before anything runs: every recorded batch k ran the env seeds this run gives it,
+        `start_seed + k·rows` onward (lerobot-eval's order).
+
+        Raises:
+            ValueError: unseeded episodes (`--seed` None cannot be replayed), or other seeds (another
+                batch size: lerobot-eval caps it at `--eval.n_episodes`, its default depends on the cores).
+        """
+        if not self.n_found:
+            return
+        if start_seed is None:
+            raise ValueError("--ocr.resume=true needs seeded episodes: pass the interrupted run's --seed.")
+        for k, meta in enumerate(self.metas):
+            seeds = list(range(start_seed + k * rows, start_seed + (k + 1) * rows))
+            if meta["seeds"] != seeds:
+                raise ValueError(
+                    f"Batch {k} in {self.dir} ran env seeds {meta['seeds']}, this run gives it {seeds}: "
+                    "resume with the interrupted run's --eval.batch_size and --seed (and --eval.n_episodes "
+                    "of at least the batch size), or start over without --ocr.resume=true."
+                )
+
     def render_again(self, videos_dir: Path, rendered: int) -> bool:
-        """Whether the recorded batches holding the first `rendered` episodes must run again to render
-        their videos (`<videos_dir>/*/eval_episode_<i>.mp4`, lerobot-eval's names): True when one is
-        missing or empty, or when episodes past the recorded ones are to be rendered too (a live batch
-        would number its videos from 0 again). Sets `live_until` to the batches that then run live."""
+        """Whether the recorded batches holding the first `rendered` episodes (at most the run's episodes)
+        must run again to render their videos (`<videos_dir>/*/eval_episode_<i>.mp4`, lerobot-eval's
+        names): True when one is missing or unreadable (cut while being written), or when episodes past
+        the recorded ones are to be rendered too (a live batch would number its videos from 0 again).
+        Sets `live_until` to the batches that then run live."""
         if not self.n_found or rendered <= 0:
             return False
         rows = self.metas[0]["rows"]
-        files = [list(Path(videos_dir).glob(f"*/eval_episode_{i}.mp4")) for i in range(rendered)]
-        done = rendered <= self.n_found * rows and all(f and f[0].stat().st_size > 0 for f in files)
+        files = [sorted(Path(videos_dir).glob(f"*/eval_episode_{i}.mp4")) for i in range(rendered)]
+        done = rendered <= self.n_found * rows and all(f and video_is_complete(f[0]) for f in files)
         self.live_until = 0 if done else min(self.n_found, math.ceil(rendered / rows))
         return not done
 

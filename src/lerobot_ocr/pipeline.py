@@ -263,15 +263,19 @@ def eval_args(
 def clear_for_resume(out: Path, cmd: list[str]) -> int:
     """Prepare `out` for `cmd` (`lerobot-ocr eval … --ocr.resume=true`): keep what an interrupted run of
     the same command and checkpoint left (its batch records and videos, `eval_resume`), remove the rest.
-    A finished run (`eval_info.json`) is removed whole: running its cell again means measuring again.
+    A finished run (`eval_info.json`) is removed whole: running its cell again means measuring again; so
+    are records of batches of another size (fewer episodes than `--eval.batch_size` shrink them).
     Returns the batches kept."""
-    from lerobot_ocr.eval_resume import RECORDS_DIR, recorded_keys, run_key
+    from lerobot_ocr.eval_report import _arg
+    from lerobot_ocr.eval_resume import RECORDS_DIR, recorded_metas, run_key
 
-    records = out / RECORDS_DIR
+    records, metas = out / RECORDS_DIR, recorded_metas(out)
+    rows = min(int(_arg(cmd, "eval.batch_size") or 0), int(_arg(cmd, "eval.n_episodes") or 0))
     keep = (
-        records.is_dir()
+        bool(metas)
         and not (out / "eval_info.json").exists()
-        and recorded_keys(out) == {run_key(cmd[2:])}
+        and {m["key"] for m in metas} == {run_key(cmd[2:])}
+        and all(m["rows"] == rows for m in metas)
     )
     for f in out.iterdir() if out.is_dir() else ():
         if not (keep and f.name in (RECORDS_DIR, "videos")):

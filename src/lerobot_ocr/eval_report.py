@@ -339,19 +339,17 @@ def run_eval(args: list[str]) -> dict:
     def eval_policy_all(*a, **kw):
         if videos is not None and kw.get("max_episodes_rendered", 0) > 0:
             kw["max_episodes_rendered"] = videos
-        envs = kw.get("envs") or {}
-        if records.n_found and sum(len(tasks) for tasks in envs.values()) > 1:
-            raise ValueError(
-                "--ocr.resume=true replays single-task envs only (this env has several tasks, each numbering "
-                "its episodes and videos from 0); start over without it."
-            )
-        if records.n_found:
-            rows = next(iter(next(iter(envs.values())).values())).num_envs
-            records.check_seeds(kw.get("start_seed"), min(rows, kw["n_episodes"]))
-        rendered = min(kw.get("max_episodes_rendered", 0), kw["n_episodes"])
-        if records.n_found and not records.render_again(kw.get("videos_dir"), rendered):
-            kw["max_episodes_rendered"] = 0  # the interrupted run rendered them all
-        if records.n_found:
+        if records.n_found:  # resuming: check everything before any batch runs
+            tasks = [env for group in kw["envs"].values() for env in group.values()]
+            if len(tasks) > 1:
+                raise ValueError(
+                    "--ocr.resume=true replays single-task envs only (this env has several tasks, each "
+                    "numbering its episodes and videos from 0); start over without it."
+                )
+            records.check_seeds(kw.get("start_seed"), min(tasks[0].num_envs, kw["n_episodes"]))
+            rendered = min(kw.get("max_episodes_rendered", 0), kw["n_episodes"])
+            if not records.render_again(kw.get("videos_dir"), rendered):
+                kw["max_episodes_rendered"] = 0  # the interrupted run rendered them all
             replay = records.n_found - records.live_until
             print(f"Resuming: {replay} recorded batch(es) replayed from {records.dir}", flush=True)
         return original_eval_all(*a, **kw)

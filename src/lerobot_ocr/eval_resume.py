@@ -203,14 +203,18 @@ class BatchRecords:
             return
         if start_seed is None:
             raise ValueError("--ocr.resume=true needs seeded episodes: pass the interrupted run's --seed.")
-        for k, meta in enumerate(self.metas):
-            seeds = list(range(start_seed + k * rows, start_seed + (k + 1) * rows))
-            if meta["seeds"] != seeds:
-                raise ValueError(
-                    f"Batch {k} in {self.dir} ran env seeds {meta['seeds']}, this run gives it {seeds}: "
-                    "resume with the interrupted run's --eval.batch_size and --seed (and --eval.n_episodes "
-                    "of at least the batch size), or start over without --ocr.resume=true."
-                )
+        for k in range(self.n_found):
+            self._require_seeds(k, range(start_seed + k * rows, start_seed + (k + 1) * rows))
+
+    def _require_seeds(self, k: int, seeds) -> None:
+        """Raise ValueError unless recorded batch `k` ran the env seeds `seeds` (None: unseeded)."""
+        seeds = None if seeds is None else [int(x) for x in seeds]
+        if self.metas[k]["seeds"] != seeds:
+            raise ValueError(
+                f"Batch {k} in {self.dir} ran env seeds {self.metas[k]['seeds']}, this run gives it {seeds}: "
+                "resume with the interrupted run's --eval.batch_size and --seed (and --eval.n_episodes of "
+                "at least the batch size), or start over without --ocr.resume=true."
+            )
 
     def render_again(self, videos_dir: Path, rendered: int) -> bool:
         """Whether the recorded batches holding the first `rendered` episodes (at most the run's episodes)
@@ -282,13 +286,7 @@ class BatchRecords:
         """
         import torch
 
-        seeds = None if seeds is None else [int(x) for x in seeds]
-        if self.metas[k]["seeds"] != seeds:
-            raise ValueError(
-                f"Batch {k} in {self.dir} ran env seeds {self.metas[k]['seeds']}, this run gives it {seeds}: "
-                "resume with the interrupted run's --eval.batch_size and --seed (and --eval.n_episodes of "
-                "at least the batch size), or start over without --ocr.resume=true."
-            )
+        self._require_seeds(k, seeds)
         with np.load(self.dir / self._name(k)) as z:
             meta = json.loads(str(z["meta"]))
             names = [n for n in z.files if n.startswith("rollout.")]

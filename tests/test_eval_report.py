@@ -96,6 +96,15 @@ def test_episode_stats_stop_at_each_episode_end():
     )  # never handed back in its episode
     assert whole["ended_in_recovery"][0] is False and cut["ended_in_recovery"][0] is True
     assert cut["recovery_fraction"][1:] == whole["recovery_fraction"][1:] == [0.75, 0.5]  # rows that ran to T
+    # hand-backs and recovery chunks count only inside each episode: after its episode ended (step 2),
+    # row 0's frozen env went back to the base and then got a new recovery chunk at step 3
+    modes[3][0] = True
+    decisions = [[True, True, False], [False, False, False], [False, True, True], [True, False, False]]
+    whole, cut = episode_modes(modes, decisions=decisions), episode_modes(modes, steps, decisions)
+    assert whole["handbacks"] == [1, 1, 0] and cut["handbacks"] == [0, 1, 0]
+    assert whole["recovery_chunks"] == [2, 2, 1] and cut["recovery_chunks"] == [1, 2, 1]
+    decisions[1][0] = True  # a new recovery chunk inside row 0's episode counts
+    assert episode_modes(modes, steps, decisions)["recovery_chunks"] == [2, 2, 1]
 
 
 def test_both_budgets_from_one_long_run():

@@ -2,6 +2,7 @@
 
 import json
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -185,6 +186,12 @@ def test_an_interrupted_eval_resumes_with_the_episodes_of_one_run(
     metrics = [json.loads((d / "eval_info.json").read_text())["per_task"][0]["metrics"] for d in (whole, cut)]
     for k in ("successes", "sum_rewards", "max_rewards"):
         assert metrics[0][k] == metrics[1][k] and len(metrics[0][k]) == 6
+    # the kept video is listed as the rendering run listed it, though nothing rendered this time
+    assert [Path(p).relative_to(cut) for p in metrics[1]["video_paths"]] == [
+        Path(p).relative_to(whole) for p in metrics[0]["video_paths"]
+    ] and len(metrics[0]["video_paths"]) == 1
+    info = json.loads((cut / "eval_info.json").read_text())
+    assert info["overall"]["video_paths"] == metrics[1]["video_paths"]
     # the T rarely moves in 10 steps, so compare what the policy did: its sampled actions, bit for bit
     third = [np.load(d / "batches" / "batch_00002.npz")["rollout.action"] for d in (whole, cut)]
     np.testing.assert_array_equal(third[0], third[1])

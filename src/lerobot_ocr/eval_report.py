@@ -99,18 +99,27 @@ def budget_success(episodes: dict, n: int) -> dict:
     return out
 
 
-def episode_modes(in_recovery, steps: list[int] | None = None) -> dict[str, list]:
+def episode_modes(in_recovery, steps: list[int] | None = None, decisions=None) -> dict[str, list]:
     """(T, B) bool modes of one rollout (+ per-row episode steps; None = all T) -> per row: its fraction of
-    steps in recovery, its first step on the base (-1: never handed back) and whether its last step
-    recovered."""
+    steps in recovery, its first step on the base (-1: never handed back), whether its last step
+    recovered, and its hand-backs (recovery -> base switches).
+
+    With `decisions` ((T, B) bool, `ocr_stats()["decisions"]`) also per row its recovery chunks: the
+    decisions taken in recovery (entering counts as one). Steps after a row's episode ended are left out.
+    """
     modes = np.asarray(in_recovery, dtype=bool)
     steps = [modes.shape[0]] * modes.shape[1] if steps is None else steps
     rows = [modes[:n, b] for b, n in enumerate(steps)]
-    return {
+    out = {
         "recovery_fraction": [float(r.mean()) for r in rows],
         "first_base_step": [int(np.argmin(r)) if not r.all() else -1 for r in rows],
         "ended_in_recovery": [bool(r[-1]) for r in rows],
+        "handbacks": [int((r[:-1] & ~r[1:]).sum()) for r in rows],
     }
+    if decisions is not None:
+        d = np.asarray(decisions, dtype=bool)
+        out["recovery_chunks"] = [int((d[:n, b] & r).sum()) for b, (n, r) in enumerate(zip(steps, rows))]
+    return out
 
 
 def _arg(args: list[str], name: str) -> str | None:
@@ -335,6 +344,15 @@ def run_eval(args: list[str]) -> dict:
         return data
 
     original_eval_all = lerobot_eval.eval_policy_all
+    original_run_one = lerobot_eval.run_one
+    kept_videos: list[int] = []  # the episodes whose videos an interrupted run rendered (not rendered again)
+
+    def run_one(task_group, task_id, env, **kw):
+        group, task, metrics = original_run_one(task_group, task_id, env, **kw)
+        if kept_videos and kw.get("videos_dir") is not None:  # list them as a rendering run would
+            folder = Path(kw["videos_dir"]) / f"{group}_{task}"
+            metrics["video_paths"] = [str(folder / f"eval_episode_{i}.mp4") for i in range(kept_videos[0])]
+        return group, task, metrics
 
     def eval_policy_all(*a, **kw):
         if videos is not None and kw.get("max_episodes_rendered", 0) > 0:
@@ -350,6 +368,7 @@ def run_eval(args: list[str]) -> dict:
             rendered = min(kw.get("max_episodes_rendered", 0), kw["n_episodes"])
             if not records.render_again(kw.get("videos_dir"), rendered):
                 kw["max_episodes_rendered"] = 0  # the interrupted run rendered them all
+                kept_videos.append(rendered)
             replay = records.n_found - records.live_until
             print(f"Resuming: {replay} recorded batch(es) replayed from {records.dir}", flush=True)
         return original_eval_all(*a, **kw)
@@ -357,6 +376,7 @@ def run_eval(args: list[str]) -> dict:
     OcrJointPolicy.reset = reset
     lerobot_eval.rollout = rollout
     lerobot_eval.eval_policy_all = eval_policy_all
+    lerobot_eval.run_one = run_one
     argv = sys.argv
     try:
         sys.argv = ["lerobot-eval", *args]
@@ -366,6 +386,7 @@ def run_eval(args: list[str]) -> dict:
         OcrJointPolicy.reset = original_reset
         lerobot_eval.rollout = original_rollout
         lerobot_eval.eval_policy_all = original_eval_all
+        lerobot_eval.run_one = original_run_one
     eval_info = json.loads((Path(output_dir) / "eval_info.json").read_text())
     ocr = None
     batches = []
@@ -376,13 +397,16 @@ def run_eval(args: list[str]) -> dict:
             d.shape == b["in_recovery"].shape[::-1] for d, b in zip(dones, batches)
         )  # one rollout per batch, one policy call per env step
         steps = [episode_steps(d) for d in dones] if aligned else [None] * len(batches)
-        episodes = [episode_modes(b["in_recovery"], s) for b, s in zip(batches, steps)]
+        episodes = [episode_modes(b["in_recovery"], s, b.get("decisions")) for b, s in zip(batches, steps)]
         fractions = [f for e in episodes for f in e["recovery_fraction"]]
         ocr = {
             # over each episode's own steps (steps after an env finished are left out)
             "mean_recovery_fraction": sum(fractions) / len(fractions) if fractions else 0.0,
-            "recovery_chunks": sum(b["recovery_chunks"] for b in batches),
-            "handbacks": sum(b["handbacks"] for b in batches),
+            "recovery_chunks": sum(
+                sum(e["recovery_chunks"]) if "recovery_chunks" in e else b["recovery_chunks"]
+                for e, b in zip(episodes, batches)
+            ),
+            "handbacks": sum(sum(e["handbacks"]) for e in episodes),
             "threshold": batches[0]["threshold"] if batches else None,
             # per episode, in eval_info's order (batches run one after another, rows in env order)
             "started_ood": [bool(f) for b in batches for f in b["started_ood"]],

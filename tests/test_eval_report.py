@@ -99,7 +99,8 @@ def test_episode_stats_stop_at_each_episode_end():
     # hand-backs and recovery chunks count only inside each episode: after its episode ended (step 2),
     # row 0's frozen env went back to the base and then got a new recovery chunk at step 3
     modes[3][0] = True
-    decisions = [[True, True, False], [False, False, False], [False, True, True], [True, False, False]]
+    # (base decisions too: row 1 re-plans on the base at its hand-back, row 2 plans at step 0)
+    decisions = [[True, True, True], [False, True, False], [False, True, True], [True, False, False]]
     whole, cut = episode_modes(modes, decisions=decisions), episode_modes(modes, steps, decisions)
     assert whole["handbacks"] == [1, 1, 0] and cut["handbacks"] == [0, 1, 0]
     assert whole["recovery_chunks"] == [2, 2, 1] and cut["recovery_chunks"] == [1, 2, 1]

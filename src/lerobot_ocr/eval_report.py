@@ -365,7 +365,8 @@ def run_eval(args: list[str]) -> dict:
                     "numbering its episodes and videos from 0); start over without it."
                 )
             records.check_seeds(kw.get("start_seed"), min(tasks[0].num_envs, kw["n_episodes"]))
-            rendered = min(kw.get("max_episodes_rendered", 0), kw["n_episodes"])
+            rows = tasks[0].num_envs  # LeRobot renders every row of a batch, the last one's too
+            rendered = min(kw.get("max_episodes_rendered", 0), math.ceil(kw["n_episodes"] / rows) * rows)
             if not records.render_again(kw.get("videos_dir"), rendered):
                 kw["max_episodes_rendered"] = 0  # the interrupted run rendered them all
                 kept_videos.append(rendered)

@@ -217,10 +217,11 @@ class BatchRecords:
             )
 
     def render_again(self, videos_dir: Path, rendered: int) -> bool:
-        """Whether the recorded batches holding the first `rendered` episodes (at most the run's episodes)
-        must run again to render their videos (`<videos_dir>/*/eval_episode_<i>.mp4`, lerobot-eval's
-        names): True when one is missing or unreadable (cut while being written), or when episodes past
-        the recorded ones are to be rendered too (a live batch would number its videos from 0 again).
+        """Whether the recorded batches holding the first `rendered` episodes (at most the rows of the run's
+        batches: LeRobot renders every row of a batch) must run again to render their videos
+        (`<videos_dir>/*/eval_episode_<i>.mp4`, lerobot-eval's names): True when one is missing or
+        unreadable (cut while being written), or when episodes past the recorded ones are to be rendered
+        too (a live batch would number its videos from 0 again).
         Sets `live_until` to the batches that then run live."""
         if not self.n_found or rendered <= 0:
             return False

@@ -1,0 +1,166 @@
+"""Square: a perfectly tracked recovery plan against what the joint policy does, and what the demos show.
+
+    MUJOCO_GL=egl .venv/bin/python benchmarks/square_recovery_path.py [--demos outputs/square_ocr_cpu/demos]
+
+Needs the `cpu` chain's demos (`benchmarks/square_ocr.py --profile cpu` builds them first, ≈ 10 min; no
+training). No simulation and no trained network: it fits the shipped config's keypoint manifold
+(`configs/policy/ocr_joint_square.json`: keypoints, components, calibration, margin) on the demos' nut
+poses, as `ocr_joint` training does, then
+- moves the keypoints of 200 OOD nut starts (the env's `NutStartRegions`, seeds 0..199) exactly as the
+  planner asks: chunks of `n_recovery_action_steps` frames at `step_size` per frame along the recovery
+  vector, no still frames, re-planned after each chunk, until the density test hands back. That is the
+  recovery time of a perfect inverse policy, to compare with the measured first hand-back step of the
+  `Square (cpu)` row (`benchmarks/results/square_cpu.json`, `joint_ood.started_ood`);
+- reads from the demos how the scripted expert moves the nut: speeds, the height at which it moves the
+  nut sideways, and the end effector's distance to the nearest keypoint while the gripper is closed (the
+  planner's delay ramp `d_min`/`d_max` is in that distance).
+Writes `benchmarks/results/square_recovery_path.json` and prints the numbers; the reading is in
+`benchmarks/EXPERIMENTS.md` ("Where Square's recovery time goes").
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import platform
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+sys.path[:0] = [str(REPO / "src")]
+
+MOVING = 1e-3  # m per step: the nut moves
+SIDEWAYS = 3e-3  # m per step of horizontal motion: the nut is carried sideways
+
+
+def demo_motion(
+    pose: np.ndarray, ee: np.ndarray, gripper: np.ndarray, episode: np.ndarray, kp: np.ndarray
+) -> dict:
+    """What the demos do with the nut: pose (N, 7), ee (N, 3), gripper command (N,), episode (N,), keypoints
+    (N, K, 3), world metres."""
+    centre = kp.mean(1)
+    same = episode[1:] == episode[:-1]
+    v = np.where(same[:, None], centre[1:] - centre[:-1], 0.0)
+    speed, sideways = np.linalg.norm(v, axis=-1), np.linalg.norm(v[:, :2], axis=-1)
+    moving = speed > MOVING
+    start_height = np.percentile(centre[:, 2], 5)  # the nut at rest on the table
+    lifted = centre[:-1, 2] - start_height
+    closed = gripper > 0
+    distance = np.linalg.norm(kp - ee[:, None], axis=-1).min(1)
+    return {
+        "frames": int(len(pose)),
+        "moving_share": float(moving.mean()),
+        "speed_cm_per_step_p50_p90": (np.percentile(speed[moving], [50, 90]) * 100).round(2).tolist(),
+        "sideways_speed_cm_per_step_p50_p90": (np.percentile(sideways[moving], [50, 90]) * 100)
+        .round(2)
+        .tolist(),
+        "sideways_frames": int((sideways > SIDEWAYS).sum()),
+        "sideways_lift_cm_p5_p50": (np.percentile(lifted[sideways > SIDEWAYS], [5, 50]) * 100)
+        .round(1)
+        .tolist(),
+        "sideways_frames_below_5cm": int(((sideways > SIDEWAYS) & (lifted < 0.05)).sum()),
+        "grasp_distance_cm_p10_p50_p90": (np.percentile(distance[closed], [10, 50, 90]) * 100)
+        .round(2)
+        .tolist(),
+    }
+
+
+def ideal_recovery(
+    manifold, local, table_z: float, chunk: int, step: float, n: int = 200, cap: int = 400
+) -> dict:
+    """Frames a perfectly tracked plan takes to hand back, from `n` OOD starts (seeds 0..n-1)."""
+    import torch
+
+    from lerobot_ocr.envs.regions import NutStartRegions
+    from lerobot_ocr.keypoints import pose_to_keypoints
+
+    regions = NutStartRegions()
+    starts = [regions.sample(np.random.default_rng(seed), "ood")[0] for seed in range(n)]
+    pose = np.array(
+        [[x, y, table_z, np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)] for x, y, yaw in starts],
+        dtype=np.float32,
+    )
+    kp = pose_to_keypoints(torch.as_tensor(pose), torch.as_tensor(local, dtype=torch.float32), "quat_wxyz")
+    kp = kp.double()
+    start = kp.mean(1).clone()
+    frames = torch.full((n,), -1)
+    for t in range(0, cap, chunk):
+        out = manifold.recovery(kp)
+        frames = torch.where((frames < 0) & ~out.is_ood, torch.tensor(t), frames)
+        if bool((frames >= 0).all()):
+            break
+        unit = out.vector / torch.linalg.vector_norm(out.vector, dim=-1, keepdim=True).clamp_min(1e-12)
+        moving = (frames < 0)[:, None, None]
+        path = step * torch.arange(1, chunk + 1, dtype=kp.dtype)[:, None, None, None] * unit[None, :, None, :]
+        kp = torch.where(moving, kp + path[-1], kp)
+    handed = frames >= 0
+    shift = (kp.mean(1) - start)[handed].numpy()
+    return {
+        "starts": n,
+        "flagged_at_start": int((frames != 0).sum()),
+        "never_handed_back_within": [int((~handed).sum()), cap],
+        "frames_to_hand_back_p50_p90": np.percentile(
+            frames[handed & (frames > 0)].numpy(), [50, 90]
+        ).tolist(),
+        "shift_at_hand_back_cm_median_xyz": (np.median(shift, 0) * 100).round(1).tolist(),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--demos", default="outputs/square_ocr_cpu/demos", help="the chain's demos dataset")
+    parser.add_argument("--out", default=str(HERE / "results" / "square_recovery_path.json"))
+    args = parser.parse_args()
+    import pandas as pd
+    import torch
+
+    from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
+    from lerobot_ocr.manifold import KeypointManifold
+
+    files = sorted(Path(args.demos).glob("data/*/*.parquet"))
+    if not files:
+        raise SystemExit(
+            f"No demos under {args.demos}: run `MUJOCO_GL=egl .venv/bin/python benchmarks/square_ocr.py "
+            "--profile cpu` first (its demos stage), or pass --demos."
+        )
+    df = pd.concat([pd.read_parquet(f) for f in files], ignore_index=True)
+    cfg = json.loads((REPO / "configs" / "policy" / "ocr_joint_square.json").read_text())["policy"]
+    pose = np.stack(df["observation.object_pose"].to_numpy()).astype(np.float32)
+    state = np.stack(df["observation.state"].to_numpy()).astype(np.float32)
+    action = np.stack(df["action"].to_numpy()).astype(np.float32)
+    episode = df["episode_index"].to_numpy()
+    local = resolve_keypoints(cfg["object_keypoints"])
+    kp = pose_to_keypoints(torch.as_tensor(pose), torch.as_tensor(local, dtype=torch.float32), "quat_wxyz")
+    manifold = KeypointManifold(n_components=cfg["n_components"], score_type=cfg["score_type"])
+    manifold.fit(kp.double(), calibration_quantile=cfg["calibration_quantile"])
+    manifold.set_threshold(float(manifold.threshold_) - cfg["threshold_margin"])
+    first = np.r_[True, episode[1:] != episode[:-1]]
+    result = {
+        "command": "MUJOCO_GL=egl .venv/bin/python benchmarks/square_recovery_path.py",
+        "machine": f"{platform.machine()}, {platform.processor() or 'cpu'}",
+        "date": dt.date.today().isoformat(),
+        "demos": args.demos,
+        "plan": {k: cfg[k] for k in ("step_size", "n_recovery_action_steps", "d_min", "d_max")},
+        "ideal_recovery": ideal_recovery(
+            manifold,
+            local,
+            float(np.median(pose[first, 2])),
+            cfg["n_recovery_action_steps"],
+            cfg["step_size"],
+        ),
+        "demos_motion": demo_motion(pose, state[:, :3], action[:, -1], episode, kp.numpy()),
+    }
+    measured = REPO / "benchmarks" / "results" / "square_cpu.json"
+    if measured.exists():
+        flagged = json.loads(measured.read_text())["joint_ood"].get("started_ood") or {}
+        result["measured_mean_first_handback_step"] = flagged.get("mean_first_base_step")
+    Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+    print(json.dumps(result, indent=2))
+
+
+if __name__ == "__main__":
+    main()

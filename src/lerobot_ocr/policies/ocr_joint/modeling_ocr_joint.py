@@ -52,7 +52,7 @@ from lerobot_ocr.geometry import pose_defects, pose_to_matrix
 from lerobot_ocr.inverse_policy import KeypointInversePolicy
 from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
 from lerobot_ocr.manifold import KeypointManifold, RecoveryOutput
-from lerobot_ocr.planner import RecoveryPlanner, carry_along_plan
+from lerobot_ocr.planner import RecoveryPlanner
 from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
 from lerobot_ocr.policies.ocr_joint.processor_ocr_joint import make_ocr_joint_pre_post_processors
 from lerobot_ocr.policies.ocr_joint.switch import SwitchState, advance, decide, needs_check
@@ -359,7 +359,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._decisions: list[
             torch.Tensor
         ] = []  # per step, (B,) bool: the row got a new chunk (base or recovery)
-        self._n_chunks = self._n_handbacks = self._n_carried = 0
+        self._n_chunks = self._n_handbacks = 0
 
     def _start_rows(self, b: int, device: torch.device) -> None:
         """A first step, or a batch of another size or device (a new rollout): all rows start on the base."""
@@ -377,10 +377,6 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._unchecked = torch.full(
             (b,), float("nan"), dtype=torch.float64
         )  # the score where none was needed
-        d = self.config.object_dim
-        # end effector and object centre when each row's current recovery chunk began (carry_tolerance)
-        self._chunk_ee = torch.zeros(b, d, device=device)
-        self._chunk_centre = torch.zeros(b, d, device=device)
 
     def _observe(self, batch: dict[str, torch.Tensor]) -> Observed:
         """Pose -> keypoints -> score and recovery vector (one manifold evaluation for the batch)."""
@@ -444,43 +440,10 @@ class OcrJointPolicy(PreTrainedPolicy):
         """Fill the chunk of the rows in the (B,) mask `rows` with the first n recovery actions."""
         idx = rows.nonzero().squeeze(-1)
         recovery = obs.recovery.rows(idx)
-        cfg = self.config
-        carry = None
-        if cfg.carry_tolerance is not None:
-            keypoints, state = obs.keypoints[idx], obs.state[idx]
-            ee = state[:, cfg.ee_position_start : cfg.ee_position_start + keypoints.shape[-1]].to(keypoints)
-            centre = keypoints.mean(1)
-            continuing = self._switch.recovering[idx]  # not entering: its last chunk was a recovery chunk
-            last = self._chunk[idx, -1]
-            grasped = continuing & (last[:, cfg.gripper_action_index] > 0)
-            moved = centre - self._chunk_centre[idx].to(centre)
-            with_ee = torch.linalg.vector_norm(moved - (ee - self._chunk_ee[idx].to(ee)), dim=-1)
-            tol = cfg.carry_tolerance
-            carry = grasped & (torch.linalg.vector_norm(moved, dim=-1) > tol) & (with_ee < tol)
-            self._chunk_ee[idx] = ee.to(self._chunk_ee)
-            self._chunk_centre[idx] = centre.to(self._chunk_centre)
-        if carry is None or not bool(carry.any()):
-            actions, _ = self.recovery_actions(
-                obs.frames[idx], obs.keypoints[idx], obs.state[idx], recovery, noise=noise
-            )
-            self._chunk[idx] = actions[:, : self._chunk.shape[1]].to(self._chunk)
-            return
-        self._n_carried += int(carry.sum())
-        vector = recovery.vector[carry].to(obs.keypoints.dtype)
-        plan = self.planner(obs.keypoints[idx][carry], vector, None, delay=0)
-        carried = carry_along_plan(plan, self._chunk[idx][carry][:, -1].to(plan.dtype))
-        self._chunk[idx[carry]] = carried[:, : self._chunk.shape[1]].to(self._chunk)
-        rest = ~carry
-        if bool(rest.any()):
-            sub = idx[rest]
-            actions, _ = self.recovery_actions(
-                obs.frames[sub],
-                obs.keypoints[sub],
-                obs.state[sub],
-                recovery.rows(rest),
-                noise=None if noise is None else noise[rest],
-            )
-            self._chunk[sub] = actions[:, : self._chunk.shape[1]].to(self._chunk)
+        actions, _ = self.recovery_actions(
+            obs.frames[idx], obs.keypoints[idx], obs.state[idx], recovery, noise=noise
+        )
+        self._chunk[idx] = actions[:, : self._chunk.shape[1]].to(self._chunk)
 
     def _decide(self, obs: Observed | None, noise: torch.Tensor | None, device) -> torch.Tensor:
         """Switch the rows, plan the chunks they need, hand back; return the (B,) scores (NaN: unchecked)."""
@@ -600,7 +563,6 @@ class OcrJointPolicy(PreTrainedPolicy):
             "mean_recovery_fraction": float(modes.mean()),
             "recovery_chunks": self._n_chunks,
             "handbacks": self._n_handbacks,
-            "carried_chunks": self._n_carried,
             "score": scores,
             "in_recovery": modes,
             "decisions": torch.stack(self._decisions).numpy() if self._decisions else None,

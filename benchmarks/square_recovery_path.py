@@ -12,8 +12,9 @@ poses, as `ocr_joint` training does, then
   recovery time of a perfect inverse policy, to compare with the measured first hand-back step of the
   `Square (cpu)` row (`benchmarks/results/square_cpu.json`, `joint_ood.started_ood`);
 - reads from the demos how the scripted expert moves the nut: speeds, the height at which it moves the
-  nut sideways, and the end effector's distance to the nearest keypoint while the gripper is closed (the
-  planner's delay ramp `d_min`/`d_max` is in that distance).
+  nut sideways, the end effector's distance to the nearest keypoint while the gripper is closed (the
+  planner's delay ramp `d_min`/`d_max` is in that distance), and how far the nut moves sideways in the
+  demo windows that start as a plan with the ramp's still frames does (still, then moving).
 Writes `benchmarks/results/square_recovery_path.json` and prints the numbers; the reading is in
 `benchmarks/EXPERIMENTS.md` ("Where Square's recovery time goes").
 """
@@ -35,6 +36,12 @@ sys.path[:0] = [str(REPO / "src")]
 
 MOVING = 1e-3  # m per step: the nut moves
 SIDEWAYS = 3e-3  # m per step of horizontal motion: the nut is carried sideways
+TRACED_GRASP = 0.022  # m from the end effector to the nearest keypoint at the grasp of the 2026-11-23 trace
+
+
+def pct(x: np.ndarray, q: list[float], scale: float = 100.0, digits: int = 2) -> list[float]:
+    """Percentiles `q` of `x`, times `scale` (m -> cm), rounded."""
+    return (np.percentile(x, q) * scale).round(digits).tolist()
 
 
 def demo_motion(
@@ -46,26 +53,38 @@ def demo_motion(
     same = episode[1:] == episode[:-1]
     v = np.where(same[:, None], centre[1:] - centre[:-1], 0.0)
     speed, sideways = np.linalg.norm(v, axis=-1), np.linalg.norm(v[:, :2], axis=-1)
-    moving = speed > MOVING
-    start_height = np.percentile(centre[:, 2], 5)  # the nut at rest on the table
-    lifted = centre[:-1, 2] - start_height
-    closed = gripper > 0
+    moving, carried = speed > MOVING, sideways > SIDEWAYS
+    lifted = centre[:-1, 2] - np.percentile(centre[:, 2], 5)  # above the nut at rest on the table
     distance = np.linalg.norm(kp - ee[:, None], axis=-1).min(1)
     return {
         "frames": int(len(pose)),
         "moving_share": float(moving.mean()),
-        "speed_cm_per_step_p50_p90": (np.percentile(speed[moving], [50, 90]) * 100).round(2).tolist(),
-        "sideways_speed_cm_per_step_p50_p90": (np.percentile(sideways[moving], [50, 90]) * 100)
-        .round(2)
-        .tolist(),
-        "sideways_frames": int((sideways > SIDEWAYS).sum()),
-        "sideways_lift_cm_p5_p50": (np.percentile(lifted[sideways > SIDEWAYS], [5, 50]) * 100)
-        .round(1)
-        .tolist(),
-        "sideways_frames_below_5cm": int(((sideways > SIDEWAYS) & (lifted < 0.05)).sum()),
-        "grasp_distance_cm_p10_p50_p90": (np.percentile(distance[closed], [10, 50, 90]) * 100)
-        .round(2)
-        .tolist(),
+        "speed_cm_per_step_p50_p90": pct(speed[moving], [50, 90]),
+        "sideways_speed_cm_per_step_p50_p90": pct(sideways[moving], [50, 90]),
+        "sideways_frames": int(carried.sum()),
+        "sideways_lift_cm_p5_p50": pct(lifted[carried], [5, 50], digits=1),
+        "sideways_frames_below_5cm": int((carried & (lifted < 0.05)).sum()),
+        "grasp_distance_cm_p10_p50_p90": pct(distance[gripper > 0], [10, 50, 90]),
+    }
+
+
+def after_still(episode: np.ndarray, kp: np.ndarray, still: int, chunk: int) -> dict:
+    """Demo windows of `chunk` frames whose nut stays still for the first `still` frames and then moves (as a
+    plan with `still` still frames asks): how far the nut then moves sideways in the rest of the window."""
+    centre = kp.mean(1)
+    sideways = []
+    for e in np.unique(episode):
+        v = np.diff(centre[episode == e], axis=0)
+        speed = np.linalg.norm(v, axis=-1)
+        for s in range(len(v) - chunk + 1):
+            if (speed[s : s + still] < MOVING).all() and (speed[s + still : s + chunk] > MOVING).any():
+                sideways.append(np.linalg.norm(v[s + still : s + chunk, :2].sum(0)))
+    sideways = np.array(sideways)
+    return {
+        "still_frames": still,
+        "windows": int(len(sideways)),
+        "sideways_cm_p50_p90_p99": pct(sideways, [50, 90, 99]),
+        "share_over_2cm": float((sideways > 0.02).mean()),
     }
 
 
@@ -120,6 +139,7 @@ def main() -> None:
 
     from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
     from lerobot_ocr.manifold import KeypointManifold
+    from lerobot_ocr.planner import recovery_delay
 
     files = sorted(Path(args.demos).glob("data/*/*.parquet"))
     if not files:
@@ -139,6 +159,8 @@ def main() -> None:
     manifold.fit(kp.double(), calibration_quantile=cfg["calibration_quantile"])
     manifold.set_threshold(float(manifold.threshold_) - cfg["threshold_margin"])
     first = np.r_[True, episode[1:] != episode[:-1]]
+    chunk = cfg["n_recovery_action_steps"]
+    still = int(recovery_delay(TRACED_GRASP, cfg["d_min"], cfg["d_max"], cfg["horizon"]))
     result = {
         "command": "MUJOCO_GL=egl .venv/bin/python benchmarks/square_recovery_path.py",
         "machine": f"{platform.machine()}, {platform.processor() or 'cpu'}",
@@ -149,10 +171,13 @@ def main() -> None:
             manifold,
             local,
             float(np.median(pose[first, 2])),
-            cfg["n_recovery_action_steps"],
+            chunk,
             cfg["step_size"],
         ),
         "demos_motion": demo_motion(pose, state[:, :3], action[:, -1], episode, kp.numpy()),
+        # the still frames the shipped ramp gives at the 2.2 cm grasp of the 2026-11-23 trace, and the demos
+        "demos_after_still": after_still(episode, kp.numpy(), still, chunk),
+        "plan_sideways_cm_after_still": round((chunk - still) * cfg["step_size"] * 100, 2),
     }
     measured = REPO / "benchmarks" / "results" / "square_cpu.json"
     if measured.exists():

@@ -312,31 +312,3 @@ def test_a_new_batch_size_starts_new_episodes_and_reset_always_works(joint, id_p
     joint.reset()
     assert joint.completed_stats[-1]["started_ood"] == [False, True, False]
     assert joint.ocr_stats() == {"steps": 0}
-
-
-def test_probe_a_grasped_object_is_planned_with_at_most_grasp_delay_still_frames(
-    diffusion_base, converted_dataset, monkeypatch
-):
-    """PROBE --policy.grasp_delay: once a recovery chunk ended with the gripper closed, the next plan holds
-    still for at most grasp_delay frames; an entering row (or an open gripper) keeps the distance ramp."""
-    from conftest import TINY_OCR
-
-    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=2, grasp_delay=0)
-    plans, grip = [], [150.0]
-
-    def sample(plan, state, frames, noise=None):
-        plans.append(plan.clone())
-        return torch.full((len(plan), TINY_OCR["horizon"], 2), grip[0])  # action[-1] > 0 reads "closed"
-
-    monkeypatch.setattr(joint.inverse, "sample", sample)
-    joint.reset()
-    far = observation([OOD_POSE], [[100.0, 400.0]])  # the end effector beyond d_max: the ramp holds still
-    for _ in range(4):
-        joint.select_action(far)
-    assert len(plans) == 2
-    assert torch.equal(plans[0][0, 1], plans[0][0, 0])  # entering: the ramp's still frames
-    assert not torch.equal(plans[1][0, 1], plans[1][0, 0])  # the gripper closed: moves at once
-    grip[0] = -150.0  # open
-    for _ in range(4):
-        joint.select_action(far)
-    assert torch.equal(plans[3][0, 1], plans[3][0, 0])  # the last chunk ended open: the ramp again

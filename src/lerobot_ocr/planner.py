@@ -108,22 +108,16 @@ class RecoveryPlanner:
     d_max: float = 1.0
     normalize: bool = True
     fixed_delay: int | None = None
-    grasp_delay: int | None = None  # PROBE: still frames at most, for rows whose gripper holds the object
 
     def __post_init__(self):
         if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:
             raise ValueError(f"fixed_delay must be in [0, horizon={self.horizon}), got {self.fixed_delay}.")
 
     def __call__(
-        self,
-        keypoints: torch.Tensor,
-        recovery_vector: torch.Tensor,
-        distance: torch.Tensor,
-        grasped: torch.Tensor | None = None,
+        self, keypoints: torch.Tensor, recovery_vector: torch.Tensor, distance: torch.Tensor
     ) -> torch.Tensor:
         """(B, K, D) world keypoints, (B, D) or (B, K, D) recovery vectors, (B,) end-effector-to-object
-        distances -> (B, L, K, D) keypoint plan whose frame 0 is `keypoints`. PROBE: `grasped` (B,) bool
-        rows hold still for at most `grasp_delay` frames."""
+        distances -> (B, L, K, D) keypoint plan whose frame 0 is `keypoints`."""
         vec = recovery_vector
         if self.normalize:
             norm = torch.linalg.vector_norm(vec, dim=-1, keepdim=True)
@@ -134,6 +128,4 @@ class RecoveryPlanner:
             delay = torch.full(
                 (keypoints.shape[0],), self.fixed_delay, dtype=torch.long, device=keypoints.device
             )
-        if self.grasp_delay is not None and grasped is not None:
-            delay = torch.where(grasped.to(delay.device), delay.clamp_max(self.grasp_delay), delay)
         return plan_keypoint_trajectory(keypoints, vec, self.step_size, self.horizon, delay)

@@ -105,10 +105,6 @@ class OcrJointConfig(PreTrainedConfig):
     d_max: float = 60.0
     fixed_delay: int | None = None
     n_recovery_action_steps: int = 8
-    # PROBE (not adopted unless measured): still frames at most once the row's previous recovery chunk
-    # ended with the gripper closed (action[gripper_action_index] > 0); the reference's real-robot rule is 0.
-    grasp_delay: int | None = None
-    gripper_action_index: int = -1
 
     # Keypoint inverse policy (LeRobot's diffusion U-Net).
     down_dims: tuple[int, ...] = (256, 512, 1024)

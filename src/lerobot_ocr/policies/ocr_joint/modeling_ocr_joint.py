@@ -157,7 +157,6 @@ class OcrJointPolicy(PreTrainedPolicy):
             d_max=config.d_max,
             normalize=True,
             fixed_delay=config.fixed_delay,
-            grasp_delay=config.grasp_delay,
         )
 
         bundled = Path(bundle_dir) / BASE_DIR if bundle_dir is not None else None
@@ -425,7 +424,6 @@ class OcrJointPolicy(PreTrainedPolicy):
         state: torch.Tensor,
         recovery: RecoveryOutput | None = None,
         noise: torch.Tensor | None = None,
-        grasped: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """One recovery chunk per row: world actions (R, L, A) and the keypoint plan (R, L, K, D).
 
@@ -435,19 +433,15 @@ class OcrJointPolicy(PreTrainedPolicy):
         """
         if recovery is None:
             recovery = self.manifold.recovery(keypoints.double(), magnitude=self.config.magnitude)
-        plan = self.planner(
-            keypoints, recovery.vector.to(keypoints.dtype), self._distance(state, keypoints), grasped
-        )
+        plan = self.planner(keypoints, recovery.vector.to(keypoints.dtype), self._distance(state, keypoints))
         return self.inverse.sample(plan, state, frames, noise=noise), plan
 
     def _plan_chunks(self, obs: Observed, rows: torch.Tensor, noise: torch.Tensor | None) -> None:
         """Fill the chunk of the rows in the (B,) mask `rows` with the first n recovery actions."""
         idx = rows.nonzero().squeeze(-1)
         recovery = obs.recovery.rows(idx)
-        # PROBE: holding the object = this recovery's previous chunk ended with a close command
-        grasped = self._switch.recovering[idx] & (self._chunk[idx, -1, self.config.gripper_action_index] > 0)
         actions, _ = self.recovery_actions(
-            obs.frames[idx], obs.keypoints[idx], obs.state[idx], recovery, noise=noise, grasped=grasped
+            obs.frames[idx], obs.keypoints[idx], obs.state[idx], recovery, noise=noise
         )
         self._chunk[idx] = actions[:, : self._chunk.shape[1]].to(self._chunk)
 

@@ -364,8 +364,9 @@ def run_eval(args: list[str]) -> dict:
                     "--ocr.resume=true replays single-task envs only (this env has several tasks, each "
                     "numbering its episodes and videos from 0); start over without it."
                 )
-            records.check_seeds(kw.get("start_seed"), min(tasks[0].num_envs, kw["n_episodes"]))
-            rows = tasks[0].num_envs  # LeRobot renders every row of a batch, the last one's too
+            rows = tasks[0].num_envs
+            records.check_seeds(kw.get("start_seed"), min(rows, kw["n_episodes"]))
+            # LeRobot renders every row of a batch, the last one's too
             rendered = min(kw.get("max_episodes_rendered", 0), math.ceil(kw["n_episodes"] / rows) * rows)
             if not records.render_again(kw.get("videos_dir"), rendered):
                 kw["max_episodes_rendered"] = 0  # the interrupted run rendered them all
@@ -398,15 +399,12 @@ def run_eval(args: list[str]) -> dict:
             d.shape == b["in_recovery"].shape[::-1] for d, b in zip(dones, batches)
         )  # one rollout per batch, one policy call per env step
         steps = [episode_steps(d) for d in dones] if aligned else [None] * len(batches)
-        episodes = [episode_modes(b["in_recovery"], s, b.get("decisions")) for b, s in zip(batches, steps)]
+        episodes = [episode_modes(b["in_recovery"], s, b["decisions"]) for b, s in zip(batches, steps)]
         fractions = [f for e in episodes for f in e["recovery_fraction"]]
         ocr = {
             # over each episode's own steps (steps after an env finished are left out)
             "mean_recovery_fraction": sum(fractions) / len(fractions) if fractions else 0.0,
-            "recovery_chunks": sum(
-                sum(e["recovery_chunks"]) if "recovery_chunks" in e else b["recovery_chunks"]
-                for e, b in zip(episodes, batches)
-            ),
+            "recovery_chunks": sum(sum(e["recovery_chunks"]) for e in episodes),
             "handbacks": sum(sum(e["handbacks"]) for e in episodes),
             "threshold": batches[0]["threshold"] if batches else None,
             # per episode, in eval_info's order (batches run one after another, rows in env order)

@@ -221,3 +221,49 @@ def test_an_interrupted_eval_resumes_with_the_episodes_of_one_run(
         main(["eval", *common, "--ocr.resume=yes", f"--output_dir={cut}"])
     with pytest.raises(ValueError, match="cannot be combined with --eval.recording=true"):
         main(["eval", *common, "--ocr.resume=true", "--eval.recording=true", f"--output_dir={cut}"])
+
+
+def test_a_resumed_eval_lists_the_videos_of_a_short_last_batch(diffusion_base, tmp_path, monkeypatch):
+    """lerobot-eval renders whole batches, the last one's rows past `n_episodes` too (3 episodes in batches of
+    2 render 4 videos when 5 are asked for); a resumed run that finds them all whole renders nothing and
+    lists the same 4, and one whose last video was cut short runs those batches again."""
+    import shutil
+
+    from lerobot.scripts import lerobot_eval
+
+    from lerobot_ocr.cli import main
+
+    simulated = []
+    original = lerobot_eval.rollout
+
+    def counting_rollout(*a, **kw):
+        simulated.append(kw["seeds"])
+        return original(*a, **kw)
+
+    monkeypatch.setattr(lerobot_eval, "rollout", counting_rollout)
+    common = [f"--policy.path={diffusion_base}", "--env.type=pusht_ocr", "--env.region=ood",
+              "--env.episode_length=6", "--eval.n_episodes=3", "--eval.batch_size=2", "--policy.device=cpu",
+              "--seed=7", "--eval.use_async_envs=false", "--ocr.videos=5"]  # fmt: skip
+    whole = tmp_path / "whole"
+    assert main(["eval", *common, f"--output_dir={whole}"]) == 0
+    listed = json.loads((whole / "eval_info.json").read_text())["overall"]["video_paths"]
+    assert [Path(p).name for p in listed] == [f"eval_episode_{i}.mp4" for i in range(4)]
+
+    def resume(name, cut_video):
+        out = tmp_path / name
+        shutil.copytree(whole / "batches", out / "batches")
+        shutil.copytree(whole / "videos", out / "videos")
+        if cut_video:
+            video = next((out / "videos").rglob("eval_episode_3.mp4"))
+            video.write_bytes(video.read_bytes()[:100])
+        simulated.clear()
+        assert main(["eval", *common, "--ocr.resume=true", f"--output_dir={out}"]) == 0
+        return out, json.loads((out / "eval_info.json").read_text())["overall"]["video_paths"]
+
+    out, paths = resume("all_kept", cut_video=False)
+    assert simulated == []
+    assert [Path(p).relative_to(out) for p in paths] == [Path(p).relative_to(whole) for p in listed]
+    out, paths = resume("last_cut", cut_video=True)
+    assert simulated == [[7, 8], [9, 10]]  # every batch holding a rendered episode ran again and rendered
+    assert [Path(p).name for p in paths] == [Path(p).name for p in listed]
+    assert next((out / "videos").rglob("eval_episode_3.mp4")).stat().st_size > 100

@@ -1,6 +1,6 @@
 """Square: a perfectly tracked recovery plan against what the joint policy does, and what the demos show.
 
-    MUJOCO_GL=egl .venv/bin/python benchmarks/square_recovery_path.py [--demos outputs/square_ocr_cpu/demos]
+    MUJOCO_GL=egl .venv/bin/python benchmarks/square_recovery_path.py [--demos …] [--cell …/eval_joint_ood]
 
 Needs the `cpu` chain's demos (`benchmarks/square_ocr.py --profile cpu` builds them first, ≈ 10 min; no
 training). No simulation and no trained network: it fits the shipped config's keypoint manifold
@@ -14,7 +14,10 @@ poses, as `ocr_joint` training does, then
 - reads from the demos how the scripted expert moves the nut: speeds, the height at which it moves the
   nut sideways, the end effector's distance to the nearest keypoint while the gripper is closed (the
   planner's delay ramp `d_min`/`d_max` is in that distance), and how far the nut moves sideways in the
-  demo windows that start as a plan with the ramp's still frames does (still, then moving).
+  demo windows that start as a plan with the ramp's still frames does (still, then moving);
+- when the chain's joint OOD cell has run (`--cell`, its recorded batches), splits its measured recovery
+  steps by what was sent: before the gripper first closes (approach and grasp), with it closed (carry),
+  open again (re-grasp), and the commanded carry speed, against the plan's `step_size` per frame.
 Writes `benchmarks/results/square_recovery_path.json` and prints the numbers; the reading is in
 `benchmarks/EXPERIMENTS.md` ("Where Square's recovery time goes").
 """
@@ -136,9 +139,82 @@ def ideal_recovery(
     }
 
 
+def recovery_phases(action: np.ndarray, in_recovery: np.ndarray, done: np.ndarray) -> list[dict]:
+    """Where each recovering episode of one recorded eval batch spends its recovery, from what was sent.
+
+    action (B, T, 10) the absolute end-effector actions sent (`square_ocr`: xyz m, rot6d, gripper, > 0
+    closed), in_recovery (T, B) the switch's mode per step, done (B, T) the episode-end flags (steps
+    after the first are frozen). Per row that recovers in its first step (the episodes the density
+    flagged at the start): its steps `n`; the recovery before the gripper is first commanded closed
+    (`approach`: reaching the nut and grasping it); recovery steps with the gripper commanded closed
+    (`closed`: carrying, or squeezing nothing) and with it open after that (`open_after`: let go,
+    re-grasping); the first hand-back step (-1: never); the gripper's openings during recovery; the
+    commanded end-effector speed on closed recovery steps (m per step, all and sideways)."""
+    rows = []
+    for b in range(action.shape[0]):
+        ends = np.flatnonzero(done[b])
+        n = int(ends[0]) + 1 if len(ends) else done.shape[1]
+        rec = in_recovery[:n, b].astype(bool)
+        if not rec[0]:
+            continue
+        closed = action[b, :n, 9] > 0
+        first_close = int(np.argmax(closed)) if closed.any() else n
+        step = np.linalg.norm(np.diff(action[b, :n, :3], axis=0), axis=-1)
+        sideways = np.linalg.norm(np.diff(action[b, :n, :2], axis=0), axis=-1)
+        carry = (rec & closed)[1:] & closed[:-1]  # closed on both ends of the step, in recovery
+        rows.append(
+            {
+                "n": n,
+                "approach": int(rec[:first_close].sum()),
+                "closed": int((rec & closed).sum()),
+                "open_after": int((rec & ~closed)[first_close:].sum()),
+                "first_handback": int(np.argmin(rec)) if not rec.all() else -1,
+                "openings": int((rec[1:] & closed[:-1] & ~closed[1:]).sum()),
+                "carry_speed": step[carry].tolist(),
+                "carry_sideways": sideways[carry].tolist(),
+            }
+        )
+    return rows
+
+
+def measured_recovery(cell: Path) -> dict:
+    """`recovery_phases` over the recorded batches of a joint eval cell (`<cell>/batches/*.npz`), summed."""
+    rows = []
+    for f in sorted((cell / "batches").glob("batch_*.npz")):
+        with np.load(f) as z:
+            if "stats.in_recovery" not in z:
+                raise SystemExit(
+                    f"{f} has no switch record: --cell must be an ocr_joint cell (eval_joint_ood)."
+                )
+            rows += recovery_phases(z["rollout.action"], z["stats.in_recovery"], z["rollout.done"])
+    if not rows:
+        raise SystemExit(f"No recorded batch with a flagged episode under {cell}/batches.")
+    total = {k: int(sum(r[k] for r in rows)) for k in ("approach", "closed", "open_after")}
+    handed = [r["first_handback"] for r in rows if r["first_handback"] >= 0]
+    speed = np.concatenate([r["carry_speed"] for r in rows])
+    sideways = np.concatenate([r["carry_sideways"] for r in rows])
+    return {
+        "cell": str(cell),
+        "flagged_episodes": len(rows),
+        "never_handed_back": len(rows) - len(handed),
+        "mean_first_handback_step": round(float(np.mean(handed)), 1) if handed else None,
+        "recovery_steps_share": {k: round(v / max(1, sum(total.values())), 3) for k, v in total.items()},
+        "mean_approach_steps": round(float(np.mean([r["approach"] for r in rows])), 1),
+        "episodes_reopening_in_recovery": int(sum(r["openings"] > 0 for r in rows)),
+        "carry_speed_cm_per_step_p50_p90": pct(speed, [50, 90]) if len(speed) else None,
+        "carry_sideways_cm_per_step_p50_p90": pct(sideways, [50, 90]) if len(sideways) else None,
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--demos", default="outputs/square_ocr_cpu/demos", help="the chain's demos dataset")
+    parser.add_argument(
+        "--cell",
+        default="outputs/square_ocr_cpu/eval_joint_ood",
+        help="a joint eval cell's output dir, to "
+        "split its recovery steps (skipped when it has no recorded batches)",
+    )
     parser.add_argument("--out", default=str(HERE / "results" / "square_recovery_path.json"))
     args = parser.parse_args()
     import pandas as pd
@@ -191,6 +267,8 @@ def main() -> None:
     if measured.exists():
         flagged = json.loads(measured.read_text())["joint_ood"].get("started_ood") or {}
         result["measured_mean_first_handback_step"] = flagged.get("mean_first_base_step")
+    if list(Path(args.cell).glob("batches/batch_*.npz")):
+        result["measured_recovery"] = measured_recovery(Path(args.cell))
     Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
     print(json.dumps(result, indent=2))
 

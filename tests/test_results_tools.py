@@ -114,3 +114,37 @@ def test_the_chain_publishes_where_joint_ood_loses(tmp_path):
     assert d["episodes"] == 3 and round(d["time_factor"], 3) == 0.333
     text = ocr_pipeline.diagnosis_text(d)
     assert "solve 0.25 of them" in text and "time factor 0.33" in text and "state factor 2.67" in text
+
+
+def test_the_square_recovery_split_counts_approach_carry_and_regrasp_steps(tmp_path):
+    """Row 0 recovers 10 steps (4 open, 4 closed moving 1 cm per step sideways, 2 open again), then the base;
+    row 1 starts on the base (not counted); row 2 recovers until its episode ends at step 6, gripper open."""
+    import numpy as np
+    import square_recovery_path as srp
+
+    b, t = 3, 12
+    action = np.zeros((b, t, 10))
+    action[:, :, 9] = -1.0
+    action[0, 4:8, 9] = 1.0
+    action[0, 4:8, 1] = 0.01 * np.arange(4)  # carried 1 cm per step along y
+    in_recovery = np.zeros((t, b), bool)
+    in_recovery[:10, 0] = True
+    in_recovery[:, 2] = True
+    done = np.zeros((b, t), bool)
+    done[2, 5:] = True  # episode 2 ends at step 6; frozen after
+    rows = srp.recovery_phases(action, in_recovery, done)
+    assert len(rows) == 2
+    r0, r2 = rows
+    assert (r0["n"], r0["approach"], r0["closed"], r0["open_after"]) == (12, 4, 4, 2)
+    assert (r0["first_handback"], r0["openings"]) == (10, 1)
+    assert np.allclose(r0["carry_speed"], 0.01) and len(r0["carry_speed"]) == 3
+    assert (r2["n"], r2["approach"], r2["closed"], r2["first_handback"]) == (6, 6, 0, -1)
+    assert r2["carry_speed"] == []
+    (tmp_path / "batches").mkdir()
+    names = {"rollout.action": action, "stats.in_recovery": in_recovery, "rollout.done": done}
+    np.savez(tmp_path / "batches" / "batch_00000.npz", **names)
+    summed = srp.measured_recovery(tmp_path)
+    assert (summed["flagged_episodes"], summed["never_handed_back"]) == (2, 1)
+    assert summed["mean_first_handback_step"] == 10
+    assert summed["recovery_steps_share"] == {"approach": 0.625, "closed": 0.25, "open_after": 0.125}
+    assert summed["carry_sideways_cm_per_step_p50_p90"] == [1.0, 1.0]

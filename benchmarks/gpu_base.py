@@ -565,7 +565,11 @@ def continual_evaluate(weights: Path, work: Path, eval_batch: int | None) -> Non
         "profile": "gpu",
         "label": "gpu",
         "keep": "episode",
-        "settings": {**p, "collect": packed["collect"]},
+        # the gpu row's settings (its base, inverse policy and cells are this experiment's control)
+        "settings": {
+            **json.loads((HERE / "results" / "pusht_gpu.json").read_text())["settings"],
+            "collect": packed["collect"],
+        },
         "recipe": RECIPE,
         "aug_training": {k: train_log[k] for k in ("steps_done", "train_seconds", "gpu", "torch", "items")},
         "date": dt.date.today().isoformat(),

@@ -13,7 +13,9 @@ then adds the run to `benchmarks/results/probes.json`
 and rewrites the "Probes" section of `benchmarks/EXPERIMENTS.md` from it: one row per probe with its
 change, success rate and 95% interval, its baseline (an earlier probe by name, same seeds) and whether the
 change lies outside the baseline's interval, the only case in which it may be adopted. Arguments after
-`--` go to lerobot-eval unchanged (`--policy.<field>=…`, `--env.<field>=…`).
+`--` go to lerobot-eval unchanged (`--policy.<field>=…`, `--env.<field>=…`). A chain's finished cell
+can stand as the baseline without running again: `--from-cell outputs/<chain>/eval_joint_ood` (checked
+to be of `--checkpoint` and `--region` under this protocol).
 """
 
 from __future__ import annotations
@@ -76,6 +78,37 @@ def render(probes: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def cell_command(
+    task, checkpoint: Path, region: str, profile: dict, cell: Path, change: list[str]
+) -> list[str]:
+    """The command of a finished chain cell in `cell`, checked to be `eval_args`' for `checkpoint` and
+    `region` (its recorded batches carry that command's `run_key`: same checkpoint bytes, env, seeds,
+    batch size and episode cap), so it can stand as a probe without running again.
+
+    Raises:
+        ValueError: a change is given, the cell has not finished, or its batches are of another run.
+    """
+    from lerobot_ocr.eval_resume import recorded_keys, recorded_metas, run_key
+
+    if change:
+        raise ValueError(f"--from-cell records a cell as it ran; drop the change {change}.")
+    if not (cell / "eval_info.json").exists():
+        raise ValueError(f"{cell} has no eval_info.json: the cell has not finished (run the chain first).")
+    keys = recorded_keys(cell)
+    # the chain names its checkpoints by absolute path
+    cmds = [eval_args(task, path, region, profile, cell) for path in (checkpoint.resolve(), checkpoint)]
+    cmd = next((c for c in cmds if keys == {run_key(c[2:])}), None)
+    if cmd is None:
+        raise ValueError(
+            f"The batches in {cell} were not run on {checkpoint} from {region} starts with the benchmarks' "
+            "protocol (another checkpoint, region, env or batch size); run the probe without --from-cell."
+        )
+    n = sum(m["rows"] for m in recorded_metas(cell))
+    if n < profile["episodes"]:
+        raise ValueError(f"{cell} ran {n} episodes, fewer than --episodes {profile['episodes']}.")
+    return cmd
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -87,6 +120,13 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--baseline", default=None, help="name of an earlier probe on the same seeds")
     parser.add_argument("--obs-type", default="environment_state_agent_pos")
+    parser.add_argument(
+        "--from-cell",
+        default=None,
+        help="record a finished chain cell (e.g. outputs/square_ocr_cpu/eval_joint_ood) as this probe "
+        "instead of running it again: a baseline in seconds; its batches must be of --checkpoint and "
+        "--region under the benchmarks' protocol (no change after --)",
+    )
     parser.add_argument(
         "change", nargs="*", help="lerobot-eval arguments after --, e.g. --policy.fixed_delay=11"
     )
@@ -101,14 +141,22 @@ def main() -> None:
         )
     out = REPO / "outputs" / "probes" / args.name
     profile = {"base": "lowdim", "episodes": args.episodes, "eval_batch": 10, "device": "cpu"}
-    cmd = [
-        *eval_args(TASKS_BY_ENV[args.env_type], Path(args.checkpoint), args.region, profile, out),
-        f"--env.obs_type={args.obs_type}",  # the last of a repeated flag wins
-        *RENDER_ARGS.get(args.env_type, []),
-        *args.change,
-    ]
-    clear_for_resume(out, cmd)  # a probe cut short goes on from its last finished batch
-    run(cmd, out.with_suffix(".log"))
+    task, checkpoint = TASKS_BY_ENV[args.env_type], Path(args.checkpoint)
+    if args.from_cell:
+        out, cmd = Path(args.from_cell), None
+        try:
+            cmd = cell_command(task, checkpoint, args.region, profile, out, args.change)
+        except ValueError as e:
+            parser.error(str(e))
+    else:
+        cmd = [
+            *eval_args(task, checkpoint, args.region, profile, out),
+            f"--env.obs_type={args.obs_type}",  # the last of a repeated flag wins
+            *RENDER_ARGS.get(args.env_type, []),
+            *args.change,
+        ]
+        clear_for_resume(out, cmd)  # a probe cut short goes on from its last finished batch
+        run(cmd, out.with_suffix(".log"))
     from lerobot_ocr.eval_report import summarize
 
     ocr, episodes = (

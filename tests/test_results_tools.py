@@ -148,3 +148,40 @@ def test_the_square_recovery_split_counts_approach_carry_and_regrasp_steps(tmp_p
     assert summed["mean_first_handback_step"] == 10
     assert summed["recovery_steps_share"] == {"approach": 0.625, "closed": 0.25, "open_after": 0.125}
     assert summed["carry_sideways_cm_per_step_p50_p90"] == [1.0, 1.0]
+
+
+def test_a_finished_cell_stands_as_a_probe_only_if_its_batches_are_of_that_checkpoint_and_region(tmp_path):
+    import json
+    import os
+
+    import numpy as np
+    import pytest
+
+    from lerobot_ocr.eval_resume import run_key
+    from lerobot_ocr.pipeline import SQUARE, eval_args
+
+    ckpt, cell = tmp_path / "ckpt", tmp_path / "eval_joint_ood"
+    ckpt.mkdir()
+    (ckpt / "config.json").write_text(json.dumps({"type": "ocr_joint"}))
+    profile = {"base": "lowdim", "episodes": 20, "eval_batch": 10, "device": "cpu"}
+    key = run_key(eval_args(SQUARE, ckpt, "ood", profile, cell)[2:])  # the chain's absolute path
+    ckpt = Path(os.path.relpath(ckpt))  # the probe's, given relative to the working directory
+    (cell / "batches").mkdir(parents=True)
+    for k in range(2):
+        meta = json.dumps({"key": key, "batch": k, "rows": 10})
+        np.savez(cell / "batches" / f"batch_{k:05d}.npz", meta=np.asarray(meta))
+    with pytest.raises(ValueError, match="has not finished"):
+        probe.cell_command(SQUARE, ckpt, "ood", profile, cell, [])
+    (cell / "eval_info.json").write_text("{}")
+    cmd = probe.cell_command(SQUARE, ckpt, "ood", profile, cell, [])
+    assert f"--output_dir={cell}" in cmd and "--env.region=ood" in cmd
+    with pytest.raises(ValueError, match="were not run on"):
+        probe.cell_command(SQUARE, ckpt, "id", profile, cell, [])
+    (ckpt / "model.safetensors").write_bytes(b"retrained")  # other checkpoint bytes: another run
+    with pytest.raises(ValueError, match="were not run on"):
+        probe.cell_command(SQUARE, ckpt, "ood", profile, cell, [])
+    (ckpt / "model.safetensors").unlink()
+    with pytest.raises(ValueError, match="fewer than --episodes 30"):
+        probe.cell_command(SQUARE, ckpt, "ood", profile | {"episodes": 30}, cell, [])
+    with pytest.raises(ValueError, match="drop the change"):
+        probe.cell_command(SQUARE, ckpt, "ood", profile, cell, ["--policy.grasp_delay=0"])

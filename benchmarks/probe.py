@@ -41,11 +41,17 @@ RENDER_ARGS = {"square_ocr": ["--env.visualization_size=64"]}  # a cheaper rende
 
 
 def verdict(probe: dict, baseline: dict | None) -> str:
-    """ "outside" / "inside" the baseline's 95% interval (strict budget), or "—" without a baseline."""
+    """ "outside" / "inside" the baseline's 95% interval (strict budget), or "—" without a baseline; when
+    both report it, the same for the reference budget after a semicolon ("inside; reference outside")."""
     if baseline is None:
         return "—"
     lo, hi = baseline["ci95"]
-    return "outside" if not lo <= probe["success_rate"] <= hi else "inside"
+    out = "outside" if not lo <= probe["success_rate"] <= hi else "inside"
+    if "success_rate_reference_budget" in probe and "ci95_reference_budget" in baseline:
+        lo, hi = baseline["ci95_reference_budget"]
+        inside = lo <= probe["success_rate_reference_budget"] <= hi
+        out += "; reference " + ("inside" if inside else "outside")
+    return out
 
 
 def render(probes: list[dict]) -> str:

@@ -44,6 +44,10 @@ def test_a_probe_is_adoptable_only_outside_its_baselines_interval():
     assert probe.verdict({"success_rate": 0.685}, baseline) == "inside"
     assert probe.verdict({"success_rate": 0.75}, baseline) == "outside"
     assert probe.verdict({"success_rate": 0.5}, None) == "—"
+    with_reference = baseline | {"success_rate_reference_budget": 0.8, "ci95_reference_budget": [0.74, 0.85]}
+    assert probe.verdict({"success_rate": 0.6, "success_rate_reference_budget": 0.9}, with_reference) == (
+        "inside; reference outside"
+    )
     common = {"date": "2026-11-30", "checkpoint": "c", "region": "ood", "n_episodes": 200}
     rows = [
         {**baseline, **common, "change": []},

@@ -343,6 +343,19 @@ def assemble_checkpoint(weights: Path, out: Path, data: Path, repo_id: str) -> N
         processor.save_pretrained(out)
 
 
+def row_settings(p: dict, train_log: dict, source_train: dict) -> dict:
+    """The gpu row's settings: the `cpu` profile's `p`, with the recipe's base (`train_log`: its steps) and
+    the inverse policy of the source chain (`source_train`: its lerobot-train config)."""
+    return {
+        **p,
+        "base_dims": str(list(RECIPE["down_dims"])),
+        "base_steps": train_log["steps_done"],
+        "base_batch": RECIPE["batch"],
+        "ocr_steps": source_train["steps"],
+        "ocr_dims": str(source_train["policy"]["down_dims"]),
+    }
+
+
 def evaluate(
     weights: Path, source: Path, work: Path, cells: list[str], eval_batch: int | None = None
 ) -> None:
@@ -389,14 +402,7 @@ def evaluate(
     payload = {
         "benchmark": "pusht_ocr",
         "profile": "gpu",
-        "settings": {
-            **p,
-            "base_dims": str(list(RECIPE["down_dims"])),
-            "base_steps": train_log["steps_done"],
-            "base_batch": RECIPE["batch"],
-            "ocr_steps": source_train["steps"],
-            "ocr_dims": str(source_train["policy"]["down_dims"]),
-        },
+        "settings": row_settings(p, train_log, source_train),
         "recipe": RECIPE,
         "base_training": {k: train_log[k] for k in ("steps_done", "train_seconds", "gpu", "torch", "items")},
         **results,
@@ -514,6 +520,11 @@ def continual_evaluate(weights: Path, work: Path, eval_batch: int | None) -> Non
         raise SystemExit(f"Missing {missing}: run `evaluate` (all four cells) and `continual-pack` first.")
     train_log = _same_weights(weights, here / "train_log.json")
     base_log = json.loads((work / "train_log.json").read_text())
+    # the inverse policy the gpu row's joint took (`evaluate`'s assemble stage), for the settings
+    source_joint = Path(json.loads((work / "assemble.json").read_text())["result"]["inverse_policy_from"])
+    if not (source_joint / "train_config.json").exists():
+        raise SystemExit(f"{source_joint} (the gpu row's inverse policy) is gone: rebuild its chain first.")
+    source_train = json.loads((source_joint / "train_config.json").read_text())
     same = (
         train_log["recipe"] == base_log["recipe"]
         and train_log["steps_planned"] == train_log["steps_done"] == base_log["steps_planned"]
@@ -565,11 +576,7 @@ def continual_evaluate(weights: Path, work: Path, eval_batch: int | None) -> Non
         "profile": "gpu",
         "label": "gpu",
         "keep": "episode",
-        # the gpu row's settings (its base, inverse policy and cells are this experiment's control)
-        "settings": {
-            **json.loads((HERE / "results" / "pusht_gpu.json").read_text())["settings"],
-            "collect": packed["collect"],
-        },
+        "settings": {**row_settings(p, base_log, source_train), "collect": packed["collect"]},
         "recipe": RECIPE,
         "aug_training": {k: train_log[k] for k in ("steps_done", "train_seconds", "gpu", "torch", "items")},
         "date": dt.date.today().isoformat(),

@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import json
+import os
 import platform
 import sys
 from pathlib import Path
@@ -84,6 +85,16 @@ def render(probes: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def spellings(path: Path) -> list[Path]:
+    """`path` as given, absolute, and with the symlinks of one ancestor after another resolved (the chain
+    names its checkpoints as `<resolved workdir>/…/checkpoints/last/…`, `last` being a link)."""
+    parts = Path(os.path.abspath(path)).parts
+    out = [path, Path(*parts)] + [
+        Path(*parts[:i]).resolve().joinpath(*parts[i:]) for i in range(1, len(parts) + 1)
+    ]
+    return list(dict.fromkeys(out))
+
+
 def cell_command(
     task, checkpoint: Path, region: str, profile: dict, cell: Path, change: list[str]
 ) -> list[str]:
@@ -94,24 +105,26 @@ def cell_command(
     Raises:
         ValueError: a change is given, the cell has not finished, or its batches are of another run.
     """
-    from lerobot_ocr.eval_resume import recorded_keys, recorded_metas, run_key
+    from lerobot_ocr.eval_resume import recorded_keys, run_key
 
     if change:
         raise ValueError(f"--from-cell records a cell as it ran; drop the change {change}.")
     if not (cell / "eval_info.json").exists():
         raise ValueError(f"{cell} has no eval_info.json: the cell has not finished (run the chain first).")
     keys = recorded_keys(cell)
-    # the chain names its checkpoints by absolute path
-    cmds = [eval_args(task, path, region, profile, cell) for path in (checkpoint.resolve(), checkpoint)]
+    cmds = (eval_args(task, path, region, profile, cell) for path in spellings(checkpoint))
     cmd = next((c for c in cmds if keys == {run_key(c[2:])}), None)
     if cmd is None:
         raise ValueError(
             f"The batches in {cell} were not run on {checkpoint} from {region} starts with the benchmarks' "
             "protocol (another checkpoint, region, env or batch size); run the probe without --from-cell."
         )
-    n = sum(m["rows"] for m in recorded_metas(cell))
-    if n < profile["episodes"]:
-        raise ValueError(f"{cell} ran {n} episodes, fewer than --episodes {profile['episodes']}.")
+    info = json.loads((cell / "eval_info.json").read_text())
+    n = sum(len(t["metrics"]["successes"]) for t in info["per_task"])
+    if n != profile["episodes"]:
+        raise ValueError(
+            f"{cell} ran {n} episodes: pass --episodes {n} (the baseline's count is the cell's)."
+        )
     return cmd
 
 

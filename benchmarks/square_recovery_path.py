@@ -164,6 +164,7 @@ def recovery_phases(action: np.ndarray, in_recovery: np.ndarray, done: np.ndarra
         carry = (rec & closed)[1:] & closed[:-1]  # closed on both ends of the step, in recovery
         rows.append(
             {
+                "row": b,
                 "n": n,
                 "approach": int(rec[:first_close].sum()),
                 "closed": int((rec & closed).sum()),
@@ -178,15 +179,21 @@ def recovery_phases(action: np.ndarray, in_recovery: np.ndarray, done: np.ndarra
 
 
 def measured_recovery(cell: Path) -> dict:
-    """`recovery_phases` over the recorded batches of a joint eval cell (`<cell>/batches/*.npz`), summed."""
-    rows = []
+    """`recovery_phases` over the recorded batches of a joint eval cell (`<cell>/batches/*.npz`), summed over
+    its episodes (with `<cell>/eval_info.json`, only the first `n_episodes` rows: lerobot-eval runs whole
+    batches)."""
+    info = cell / "eval_info.json"
+    n_episodes = None
+    if info.exists():
+        n_episodes = sum(len(t["metrics"]["successes"]) for t in json.loads(info.read_text())["per_task"])
+    rows, offset = [], 0
     for f in sorted((cell / "batches").glob("batch_*.npz")):
         with np.load(f) as z:
             if "stats.in_recovery" not in z:
-                raise SystemExit(
-                    f"{f} has no switch record: --cell must be an ocr_joint cell (eval_joint_ood)."
-                )
-            rows += recovery_phases(z["rollout.action"], z["stats.in_recovery"], z["rollout.done"])
+                raise SystemExit(f"{f} has no switch record: --cell must be an ocr_joint cell.")
+            batch = recovery_phases(z["rollout.action"], z["stats.in_recovery"], z["rollout.done"])
+            rows += [r for r in batch if n_episodes is None or offset + r["row"] < n_episodes]
+            offset += z["rollout.done"].shape[0]
     if not rows:
         raise SystemExit(f"No recorded batch with a flagged episode under {cell}/batches.")
     total = {k: int(sum(r[k] for r in rows)) for k in ("approach", "closed", "open_after")}

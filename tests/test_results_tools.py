@@ -144,17 +144,28 @@ def test_the_square_recovery_split_counts_approach_carry_and_regrasp_steps(tmp_p
     assert np.allclose(r0["carry_speed"], 0.01) and len(r0["carry_speed"]) == 3
     assert (r2["n"], r2["approach"], r2["closed"], r2["first_handback"]) == (6, 6, 0, -1)
     assert r2["carry_speed"] == []
-    (tmp_path / "batches").mkdir()
-    names = {"rollout.action": action, "stats.in_recovery": in_recovery, "rollout.done": done}
-    np.savez(tmp_path / "batches" / "batch_00000.npz", **names)
+    import torch
+
+    from lerobot_ocr.eval_resume import BatchRecords
+
+    records = BatchRecords(tmp_path, "key", resume=False)  # as an eval cell records its batches
+    rollout = {"action": torch.as_tensor(action), "done": torch.as_tensor(done)}
+    records.save(0, rollout, {"steps": t, "in_recovery": in_recovery}, None, [0, 1, 2], 1.0)
     summed = srp.measured_recovery(tmp_path)
     assert (summed["flagged_episodes"], summed["never_handed_back"]) == (2, 1)
     assert summed["mean_first_handback_step"] == 10
     assert summed["recovery_steps_share"] == {"approach": 0.625, "closed": 0.25, "open_after": 0.125}
     assert summed["carry_sideways_cm_per_step_p50_p90"] == [1.0, 1.0]
+    import json
+
+    info = {"per_task": [{"metrics": {"successes": [0, 0]}}]}
+    (tmp_path / "eval_info.json").write_text(json.dumps(info))
+    assert srp.measured_recovery(tmp_path)["flagged_episodes"] == 1  # row 2 ran past the cell's 2 episodes
 
 
 def test_a_finished_cell_stands_as_a_probe_only_if_its_batches_are_of_that_checkpoint_and_region(tmp_path):
+    """The chain runs its cells on `<resolved workdir>/ocr/checkpoints/last/pretrained_model`, `last` a link;
+    the probe's --checkpoint is typed relative, through the link."""
     import json
     import os
 
@@ -164,28 +175,31 @@ def test_a_finished_cell_stands_as_a_probe_only_if_its_batches_are_of_that_check
     from lerobot_ocr.eval_resume import run_key
     from lerobot_ocr.pipeline import SQUARE, eval_args
 
-    ckpt, cell = tmp_path / "ckpt", tmp_path / "eval_joint_ood"
-    ckpt.mkdir()
-    (ckpt / "config.json").write_text(json.dumps({"type": "ocr_joint"}))
+    work, cell = tmp_path / "chain", tmp_path / "chain" / "eval_joint_ood"
+    (work / "ocr" / "checkpoints" / "000010" / "pretrained_model").mkdir(parents=True)
+    (work / "ocr" / "checkpoints" / "last").symlink_to("000010")
+    chain_ckpt = work.resolve() / "ocr" / "checkpoints" / "last" / "pretrained_model"
+    (chain_ckpt / "config.json").write_text(json.dumps({"type": "ocr_joint"}))
     profile = {"base": "lowdim", "episodes": 20, "eval_batch": 10, "device": "cpu"}
-    key = run_key(eval_args(SQUARE, ckpt, "ood", profile, cell)[2:])  # the chain's absolute path
-    ckpt = Path(os.path.relpath(ckpt))  # the probe's, given relative to the working directory
+    key = run_key(eval_args(SQUARE, chain_ckpt, "ood", profile, cell)[2:])
+    ckpt = Path(os.path.relpath(chain_ckpt))
     (cell / "batches").mkdir(parents=True)
     for k in range(2):
         meta = json.dumps({"key": key, "batch": k, "rows": 10})
         np.savez(cell / "batches" / f"batch_{k:05d}.npz", meta=np.asarray(meta))
     with pytest.raises(ValueError, match="has not finished"):
         probe.cell_command(SQUARE, ckpt, "ood", profile, cell, [])
-    (cell / "eval_info.json").write_text("{}")
+    info = {"per_task": [{"metrics": {"successes": [True] * 20}}]}
+    (cell / "eval_info.json").write_text(json.dumps(info))
     cmd = probe.cell_command(SQUARE, ckpt, "ood", profile, cell, [])
-    assert f"--output_dir={cell}" in cmd and "--env.region=ood" in cmd
+    assert f"--policy.path={chain_ckpt}" in cmd and "--env.region=ood" in cmd
     with pytest.raises(ValueError, match="were not run on"):
         probe.cell_command(SQUARE, ckpt, "id", profile, cell, [])
-    (ckpt / "model.safetensors").write_bytes(b"retrained")  # other checkpoint bytes: another run
+    (chain_ckpt / "model.safetensors").write_bytes(b"retrained")  # other checkpoint bytes: another run
     with pytest.raises(ValueError, match="were not run on"):
         probe.cell_command(SQUARE, ckpt, "ood", profile, cell, [])
-    (ckpt / "model.safetensors").unlink()
-    with pytest.raises(ValueError, match="fewer than --episodes 30"):
-        probe.cell_command(SQUARE, ckpt, "ood", profile | {"episodes": 30}, cell, [])
+    (chain_ckpt / "model.safetensors").unlink()
+    with pytest.raises(ValueError, match="ran 20 episodes: pass --episodes 20"):
+        probe.cell_command(SQUARE, ckpt, "ood", profile | {"episodes": 10}, cell, [])
     with pytest.raises(ValueError, match="drop the change"):
         probe.cell_command(SQUARE, ckpt, "ood", profile, cell, ["--policy.grasp_delay=0"])

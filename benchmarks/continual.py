@@ -234,7 +234,7 @@ def main() -> None:
         out = here / f"base_{name}"
 
         def finetune(out=out, root=root, repo=repo, name=name):
-            train(finetune_args(p, chain.base_ckpt, root, repo, out), out, logs / f"ft_{name}.log")
+            return train(finetune_args(p, chain.base_ckpt, root, repo, out), out, logs / f"ft_{name}.log")
 
         stage(f"ft_{name}", finetune)
         ckpts[name] = out / "checkpoints" / "last" / "pretrained_model"

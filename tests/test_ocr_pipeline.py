@@ -1,5 +1,6 @@
 """lerobot_ocr.pipeline: stage commands import this clone's `lerobot_ocr`, whatever the venv points at."""
 
+import json
 import sys
 from pathlib import Path
 
@@ -51,6 +52,9 @@ def test_a_training_stage_resumes_from_its_last_checkpoint(tmp_path):
         "        ckpt = pathlib.Path(out[0]) / 'checkpoints' / step / 'pretrained_model'\n"
         "        ckpt.mkdir(parents=True)\n"
         "        (ckpt / 'train_config.json').write_text('{}')\n"
+        "        state = ckpt.parent / 'training_state'\n"
+        "        state.mkdir()\n"
+        "        (state / 'training_step.json').write_text('{\"step\": %d}' % int(step))\n"
         "    (pathlib.Path(out[0]) / 'checkpoints' / 'last').symlink_to('000004')\n"
         "    sys.exit(1)  # killed after its second checkpoint\n"
     )
@@ -60,7 +64,14 @@ def test_a_training_stage_resumes_from_its_last_checkpoint(tmp_path):
         train(args, out, log)
     assert {d.name for d in (out / "checkpoints").iterdir()} == {"000002", "000004", "last"}  # kept to resume
     assert prune_checkpoints(tmp_path / "no_run") == []  # nothing to keep or delete without a `last`
-    train(args, out, log)  # the re-run resumes
+    legs = tmp_path / "train_legs.json"
+    assert [leg["step"] for leg in json.loads(legs.read_text())] == [0]
+    # the killed run started 100 s before its last checkpoint: that time counts; what came after is lost
+    last = (out / "checkpoints" / "last").resolve().stat().st_mtime
+    legs.write_text(json.dumps([{"start": last - 100.0, "step": 0}]))
+    result = train(args, out, log)  # the re-run resumes
+    assert result["resumed_at_step"] == 4 and result["earlier_legs_seconds"] == pytest.approx(100.0, abs=1e-3)
+    assert [leg["step"] for leg in json.loads(legs.read_text())] == [0, 4]
     assert {d.name for d in (out / "checkpoints").iterdir()} == {"000004", "last"}  # finished: only the last
     assert (out / "checkpoints" / "last" / "pretrained_model" / "train_config.json").is_file()
     first, second = calls.read_text().splitlines()
@@ -70,6 +81,15 @@ def test_a_training_stage_resumes_from_its_last_checkpoint(tmp_path):
     )
     assert (tmp_path / "logs" / "train.resumed.log").is_file()
     assert save_freq(60000) == 2000 and save_freq(3000) == 1000 and save_freq(2) == 1
+
+    # a stage's time includes its earlier runs' when the ledger knew them
+    from lerobot_ocr.pipeline import Stages
+
+    stages = Stages(tmp_path)
+    stages("resumed", lambda: {"earlier_legs_seconds": 50.0, "resumed_at_step": 4})
+    stages("unrecorded", lambda: {"earlier_legs_seconds": None, "resumed_at_step": 4})
+    assert 50.0 <= stages.times["resumed"] < 60.0 and stages.times["unrecorded"] < 10.0
+    assert json.loads((tmp_path / "resumed.json").read_text())["seconds"] == stages.times["resumed"]
 
 
 def test_square_cells_run_the_references_protocol_per_policy(tmp_path):

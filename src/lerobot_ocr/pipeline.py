@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
-from lerobot_ocr.files import clear_workdir
+from lerobot_ocr.files import atomic_write, clear_workdir
 
 BIN = Path(sys.executable).parent
 SRC = Path(__file__).resolve().parents[1]  # this checkout's `src` (or site-packages)
@@ -115,7 +115,8 @@ def run(cmd: list[str], log: Path) -> None:
 
 
 class Stages:
-    """Run named stages once; a `<name>.json` marker (with its wall time) makes a re-run skip them."""
+    """Run named stages once; a `<name>.json` marker (with its wall time) makes a re-run skip them. The wall
+    time of a resumed training stage (`train`) includes its interrupted runs up to their last checkpoint."""
 
     def __init__(self, work: Path):
         self.work, self.times = work, {}
@@ -130,6 +131,9 @@ class Stages:
             start = time.time()
             info = {"result": fn()}
             info["seconds"] = time.time() - start
+            if isinstance(info["result"], dict) and "earlier_legs_seconds" in info["result"]:
+                # a training stage resumed after an interruption: its earlier runs' time counts too
+                info["seconds"] += info["result"]["earlier_legs_seconds"] or 0.0
             marker.write_text(json.dumps(info, indent=2))
             print(f"[{name}] finished in {info['seconds']:.0f} s", flush=True)
         self.times[name] = info["seconds"]
@@ -153,23 +157,48 @@ def save_freq(steps: int) -> int:
     return max(1, min(SAVE_EVERY, steps // 3))
 
 
-def train(args: list[str], out: Path, log: Path) -> None:
+def train(args: list[str], out: Path, log: Path) -> dict:
     """Run the training command `args` (a trainer from `trainer()` and lerobot-train flags writing to
     `out`), resuming mid-stage: when `out` holds a checkpoint, lerobot-train `--resume`s from its last
     one (same config, optimizer and step), so an interruption loses at most `save_freq` steps. Once it
     finishes, only its last checkpoint is kept (`prune_checkpoints`).
 
+    Returns {"earlier_legs_seconds", "resumed_at_step"} (None, 0 for a run that was not resumed): the
+    wall time of the interrupted runs up to their last checkpoint, the work this run did not redo (from
+    `<out>_legs.json`, beside `out`: lerobot-train wants a fresh `out`; None when a run left no record),
+    which `Stages` adds to the stage's time.
+
     Raises:
         RuntimeError: the command failed (see `run`).
     """
     config = out / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
+    legs_file = out.with_name(f"{out.name}_legs.json")  # when each run of the stage started, from which step
     if config.is_file():
+        step_file = config.parents[1] / "training_state" / "training_step.json"
+        step = json.loads(step_file.read_text())["step"] if step_file.is_file() else None
+        legs = json.loads(legs_file.read_text()) if legs_file.is_file() else None
+        if legs:  # the previous run counts up to its last checkpoint (after it, work was lost)
+            last = (out / "checkpoints" / "last").resolve().stat().st_mtime
+            legs[-1]["seconds"] = max(0.0, last - legs[-1]["start"])
+        known = legs is not None and all("seconds" in leg for leg in legs)
+        earlier = sum(leg["seconds"] for leg in legs) if known else None
+        write_json(legs_file, [*(legs or []), {"start": time.time(), "step": step}])
         prefix = [a for a in args if not a.startswith("--")]  # the trainer: executable (+ -m module)
         run([*prefix, "--resume=true", f"--config_path={config}"], log.with_suffix(".resumed.log"))
+        result = {"earlier_legs_seconds": earlier, "resumed_at_step": step}
     else:
         shutil.rmtree(out, ignore_errors=True)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        write_json(legs_file, [{"start": time.time(), "step": 0}])
         run(args, log)
+        result = {"earlier_legs_seconds": None, "resumed_at_step": 0}
     prune_checkpoints(out)
+    return result
+
+
+def write_json(path: Path, data) -> None:
+    """`data` as JSON to `path`, atomically."""
+    atomic_write(path, lambda tmp: tmp.write_text(json.dumps(data)))
 
 
 def prune_checkpoints(out: Path) -> list[Path]:
@@ -364,7 +393,8 @@ def run_chain(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> Chai
     base_out = work / "base"
 
     def train_base():
-        train(base_train_args(p, base_data, base_out, task, base_repo), base_out, logs / "base_train.log")
+        args = base_train_args(p, base_data, base_out, task, base_repo)
+        return train(args, base_out, logs / "base_train.log")
 
     stage("base_train", train_base)
     base_ckpt = base_out / "checkpoints" / "last" / "pretrained_model"
@@ -387,7 +417,7 @@ def run_chain(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> Chai
     ocr_out = work / "ocr"
 
     def train_ocr():
-        train(
+        return train(
             [
                 *trainer(p),
                 f"--config_path={CONFIGS / task.policy_config}",

@@ -162,7 +162,7 @@ def main() -> None:
     profile = {"base": "lowdim", "episodes": args.episodes, "eval_batch": 10, "device": "cpu"}
     task, checkpoint = TASKS_BY_ENV[args.env_type], Path(args.checkpoint)
     if args.from_cell:
-        out, cmd = Path(args.from_cell), None
+        out = Path(args.from_cell)
         try:
             cmd = cell_command(task, checkpoint, args.region, profile, out, args.change)
         except ValueError as e:

@@ -130,6 +130,22 @@ def test_eval_renders_the_videos_asked_for_and_async_envs_change_no_episode(
         main(["eval", *common, "--ocr.videos=all", f"--output_dir={tmp_path / 'bad'}"])
 
 
+def record_rollout_seeds(monkeypatch) -> list:
+    """Wrap lerobot-eval's `rollout` so that each simulated batch appends its env seeds to the list returned
+    (replayed batches simulate nothing, so they add none)."""
+    from lerobot.scripts import lerobot_eval
+
+    simulated = []
+    original = lerobot_eval.rollout
+
+    def counting_rollout(*a, **kw):
+        simulated.append(kw["seeds"])
+        return original(*a, **kw)
+
+    monkeypatch.setattr(lerobot_eval, "rollout", counting_rollout)
+    return simulated
+
+
 @pytest.mark.parametrize("joint", [True, False], ids=["ocr_joint", "base"])
 def test_an_interrupted_eval_resumes_with_the_episodes_of_one_run(
     joint, diffusion_base, converted_dataset, tmp_path, monkeypatch
@@ -137,8 +153,6 @@ def test_an_interrupted_eval_resumes_with_the_episodes_of_one_run(
     """Every finished batch is recorded; `--ocr.resume=true` replays the recorded ones (no simulation) and
     runs the rest from the RNG states they left: the same episodes, stats and counts as one run."""
     import shutil
-
-    from lerobot.scripts import lerobot_eval
 
     from lerobot_ocr.cli import main
     from test_ocr_joint import make_joint
@@ -148,14 +162,7 @@ def test_an_interrupted_eval_resumes_with_the_episodes_of_one_run(
         make_joint(diffusion_base, converted_dataset).save_pretrained(policy)
     else:
         shutil.copytree(diffusion_base, policy)
-    simulated = []
-    original = lerobot_eval.rollout
-
-    def counting_rollout(*a, **kw):
-        simulated.append(kw["seeds"])
-        return original(*a, **kw)
-
-    monkeypatch.setattr(lerobot_eval, "rollout", counting_rollout)
+    simulated = record_rollout_seeds(monkeypatch)
     common = [f"--policy.path={policy}", "--env.type=pusht_ocr", "--env.region=ood",
               "--env.episode_length=10", "--eval.n_episodes=6", "--eval.batch_size=2", "--policy.device=cpu",
               "--seed=7", "--eval.use_async_envs=false", "--ocr.decision_budget=60",
@@ -229,18 +236,9 @@ def test_a_resumed_eval_lists_the_videos_of_a_short_last_batch(diffusion_base, t
     lists the same 4, and one whose last video was cut short runs those batches again."""
     import shutil
 
-    from lerobot.scripts import lerobot_eval
-
     from lerobot_ocr.cli import main
 
-    simulated = []
-    original = lerobot_eval.rollout
-
-    def counting_rollout(*a, **kw):
-        simulated.append(kw["seeds"])
-        return original(*a, **kw)
-
-    monkeypatch.setattr(lerobot_eval, "rollout", counting_rollout)
+    simulated = record_rollout_seeds(monkeypatch)
     common = [f"--policy.path={diffusion_base}", "--env.type=pusht_ocr", "--env.region=ood",
               "--env.episode_length=6", "--eval.n_episodes=3", "--eval.batch_size=2", "--policy.device=cpu",
               "--seed=7", "--eval.use_async_envs=false", "--ocr.videos=5"]  # fmt: skip

@@ -20,7 +20,7 @@ from lerobot_ocr.geometry.rotations import axis_angle_to_matrix, matrix_to_axis_
 
 @dataclass
 class SquareExpertConfig:
-    speed: float = 0.012  # m per step (20 Hz -> 0.24 m/s)
+    speed: float = 0.015  # m per step (20 Hz -> 0.30 m/s)
     turn: float = 0.08  # rad per step
     hover: float = 0.08  # m above the handle before descending
     grasp_depth: float = 0.0  # grip-site height relative to the handle site when closing
@@ -33,7 +33,9 @@ class SquareExpertConfig:
     yaw_offset: float = np.pi / 2  # gripper yaw relative to the nut's yaw that straddles the handle
     tolerance: float = 0.006  # m: phase goal reached
     align_tolerance: float = 0.006  # m: nut centre over the peg before lowering
-    feedback_gain: float = 0.3  # fraction of the nut-peg error added to the target per step
+    # fraction of the nut-peg error added to the target per step; 0.3 rang around the peg (±2 cm, a
+    # 27-step period) because the arm lags the target by up to 5 cm (benchmarks/EXPERIMENTS.md, 2026-12-03)
+    feedback_gain: float = 0.1
     max_correction: float = 0.04  # m: bound on the feedback's correction (no wind-up if the nut is lost)
     wrist_limit: float = 1.8  # rad: keep the last joint (±2.90 on a Panda) away from its stops
     jitter: float = 0.004  # m: per-episode noise on the waypoints (demo diversity)

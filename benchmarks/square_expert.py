@@ -84,7 +84,8 @@ def main() -> None:
                 "",
                 f"Machine: {results['machine']}. Date: {results['date']}.",
                 "",
-                "Command: `MUJOCO_GL=egl .venv/bin/python benchmarks/square_expert.py`",
+                "Command: `MUJOCO_GL=egl .venv/bin/python benchmarks/square_expert.py "
+                f"--episodes {args.episodes}`",
             ]
         )
         update_section("Square expert", body)

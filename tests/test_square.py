@@ -121,8 +121,8 @@ def test_expert_succeeds_on_fixed_seeds(square_env, region, seed):
 @pytest.mark.parametrize("seed", [0, 1, 4])
 def test_expert_settles_the_nut_over_the_peg(square_env, seed):
     """Once the carried nut first comes within 2 cm of the peg, the expert starts lowering it within 30
-    steps. With the old feedback gain (0.3) it rang around the peg (±2 cm, a 27-step period) for 67-97
-    steps on these seeds, and the demos took 187 steps on average instead of about 150."""
+    steps. The old expert (feedback gain 0.3, speed 0.012) rang around the peg (±2 cm, a 27-step period)
+    for 67-97 steps on these seeds, and its demos took 187 steps on average instead of about 150."""
     from lerobot_ocr.experts.square_expert import SquareExpert
 
     env = square_env

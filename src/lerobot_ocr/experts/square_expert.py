@@ -33,9 +33,7 @@ class SquareExpertConfig:
     yaw_offset: float = np.pi / 2  # gripper yaw relative to the nut's yaw that straddles the handle
     tolerance: float = 0.006  # m: phase goal reached
     align_tolerance: float = 0.006  # m: nut centre over the peg before lowering
-    # fraction of the nut-peg error added to the target per step; 0.3 rang around the peg (±2 cm, a
-    # 27-step period) because the arm lags the target by up to 5 cm (benchmarks/EXPERIMENTS.md, 2026-12-03)
-    feedback_gain: float = 0.1
+    feedback_gain: float = 0.1  # fraction of the nut-peg error added to the target per step
     max_correction: float = 0.04  # m: bound on the feedback's correction (no wind-up if the nut is lost)
     wrist_limit: float = 1.8  # rad: keep the last joint (±2.90 on a Panda) away from its stops
     jitter: float = 0.004  # m: per-episode noise on the waypoints (demo diversity)
@@ -169,7 +167,9 @@ class SquareExpert:
             eef = env.eef_pose()[0]
             peg = env.peg_position()
             # integral feedback on the nut's centre (absorbs the arm's sag under load); a gain < 1
-            # keeps a swinging nut from winding it up
+            # keeps a swinging nut from winding it up, and a small one (0.1) keeps the loop from ringing
+            # while the arm lags the target by centimetres (0.3 rang ±2 cm around the peg: EXPERIMENTS.md
+            # "A Square expert that does not ring over the peg")
             goal_xy = self.target_pos[:2] + cfg.feedback_gain * (peg[:2] - nut[:2])
             nominal = peg[:2] + (eef[:2] - nut[:2])  # where the eef goes without sag
             excess = goal_xy - nominal

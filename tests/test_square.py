@@ -123,24 +123,20 @@ def test_expert_settles_the_nut_over_the_peg(square_env, seed):
     """Once the carried nut first comes within 2 cm of the peg, the expert starts lowering it within 30
     steps. The old expert (feedback gain 0.3, speed 0.012) rang around the peg (±2 cm, a 27-step period)
     for 67-97 steps on these seeds, and its demos took 187 steps on average instead of about 150."""
+    from lerobot_ocr.experts.rollout import rollout
     from lerobot_ocr.experts.square_expert import SquareExpert
 
     env = square_env
     env.unwrapped.region = "id"
-    env.reset(seed=seed)
-    base = env.unwrapped
     expert = SquareExpert(seed=seed)
-    expert.reset(base)
-    near = lowering = None
-    for t in range(400):
-        action = expert.act(base)
+
+    def record(obs, base):  # after the expert acts, before the env steps
         gap = np.linalg.norm(base.peg_position()[:2] - base.nut_pose_matrix()[:2, 3])
-        if expert.phase == "carry" and near is None and gap < 0.02:
-            near = t
-        if expert.phase == "lower":
-            lowering = t
-            break
-        env.step(action)
+        return {"phase": expert.phase, "gap": gap}
+
+    steps = rollout(env, expert, seed, 400, record=record)["steps"]
+    near = next((t for t, s in enumerate(steps) if s["phase"] == "carry" and s["gap"] < 0.02), None)
+    lowering = next((t for t, s in enumerate(steps) if s["phase"] == "lower"), None)
     assert near is not None and lowering is not None, f"seed {seed}: the expert never lowered the nut"
     assert lowering - near <= 30, f"seed {seed}: {lowering - near} steps from near the peg to lowering"
 

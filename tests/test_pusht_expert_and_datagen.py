@@ -1,3 +1,5 @@
+import json
+
 import numpy as np
 import pytest
 
@@ -101,6 +103,26 @@ def test_resume_refuses_other_settings(tmp_path):
     (work / "ledger.json").write_text('{"tried": {}, "params": {"region": "ood", "seed": 0}}')
     with pytest.raises(ValueError, match="same settings"):
         datagen.generate_pusht(tmp_path / "ds", episodes=1, region="id")
+
+
+def test_resume_refuses_a_work_dir_made_by_another_expert(tmp_path):
+    """The expert's settings are part of the work dir's: demos of an expert with other defaults (an
+    older release) are refused, not mixed with the new ones."""
+    import shutil
+    from dataclasses import asdict
+
+    from lerobot_ocr.experts.pusht_expert import PushTExpertConfig
+
+    root = tmp_path / "ds"
+    datagen.generate_pusht(root, episodes=1, region="id", use_videos=False, keep_work=True)
+    ledger_path = tmp_path / "ds.work" / "ledger.json"
+    ledger = json.loads(ledger_path.read_text())
+    assert ledger["params"]["expert"] == json.loads(json.dumps(asdict(PushTExpertConfig())))
+    shutil.rmtree(root)
+    ledger["params"]["expert"]["move_speed"] /= 2
+    ledger_path.write_text(json.dumps(ledger))
+    with pytest.raises(ValueError, match="same settings"):
+        datagen.generate_pusht(root, episodes=1, region="id", use_videos=False)
 
 
 def test_generate_takes_the_env_settings_lerobot_eval_takes(tmp_path):

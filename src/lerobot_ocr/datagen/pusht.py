@@ -21,6 +21,7 @@ from lerobot_ocr.datagen.recording import (
     env_settings,
     episode_arrays,
     episode_frames,
+    expert_settings,
     finish,
     work_dir,
 )
@@ -106,7 +107,7 @@ def generate_pusht(
     expert = PushTExpert(seed=seed)
     paths = collect_episodes(
         work,
-        {"region": region, "seed": seed, **options},
+        {"region": region, "seed": seed, "expert": expert_settings(expert.cfg), **options},
         episodes,
         seed,
         lambda seeds: [record_episode(env, expert, s) for s in seeds],

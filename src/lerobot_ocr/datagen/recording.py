@@ -10,6 +10,7 @@ Two steps, both safe to interrupt:
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 from collections.abc import Callable, Iterator
@@ -47,6 +48,12 @@ def env_settings(options: dict | None) -> dict:
                 f"env option {key!r} is set by the generator (use --region / --no-images), not --env.{key}."
             )
     return options
+
+
+def expert_settings(config) -> dict:
+    """An expert's config dataclass as JSON values, for the work dir's settings: a work dir made by an
+    expert with other settings (e.g. a release's older defaults) is refused, not mixed into the new demos."""
+    return json.loads(json.dumps(dataclasses.asdict(config)))
 
 
 def _save_episode(path: Path, seed: int, data: dict[str, np.ndarray]) -> None:

@@ -22,6 +22,7 @@ from lerobot_ocr.datagen.recording import (
     env_settings,
     episode_arrays,
     episode_frames,
+    expert_settings,
     finish,
     work_dir,
 )
@@ -121,7 +122,7 @@ def generate_square(
     expert = SquareExpert(seed=seed)
     paths = collect_episodes(
         work,
-        {"region": region, "seed": seed, "images": images, **options},
+        {"region": region, "seed": seed, "images": images, "expert": expert_settings(expert.cfg), **options},
         episodes,
         seed,
         lambda seeds: [record_episode(env, expert, s) for s in seeds],

@@ -1,6 +1,6 @@
 """Square result pipeline: demos -> low-dim base -> convert -> ocr_joint -> lerobot-eval (4 cells).
 
-    MUJOCO_GL=egl .venv/bin/python benchmarks/square_ocr.py --profile cpu  # ≈ 2.7 h on 2 cores: the row
+    MUJOCO_GL=egl .venv/bin/python benchmarks/square_ocr.py --profile cpu  # ≈ 5 h on 2 cores: the row
     MUJOCO_GL=egl .venv/bin/python benchmarks/square_ocr.py --profile gpu  # the reference's sizes, GPU
 
 Like the reference, the base policy is low-dimensional (eef pose + gripper, nut pose). The profiles

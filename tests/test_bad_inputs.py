@@ -147,6 +147,23 @@ def test_a_base_reading_features_the_data_lacks_is_refused_at_construction(pusht
     assert action.shape == (2, 2) and torch.isfinite(action).all()
 
 
+def test_a_rename_in_the_bases_own_preprocessor_is_honoured(pusht_dataset, converted_dataset):
+    """lerobot-train refuses --rename_map for a fresh policy; the error's other fix, the map in the base's
+    saved preprocessor, lets a new ocr_joint wrap the base and run on the dataset's key."""
+    import json
+
+    base = renamed_base(pusht_dataset, pusht_dataset.with_name("base_top_pre"))
+    config_path = base / "policy_preprocessor.json"
+    config = json.loads(config_path.read_text())
+    (step,) = [s for s in config["steps"] if s["registry_name"] == "rename_observations_processor"]
+    step["config"]["rename_map"] = {"observation.image": "observation.images.top"}
+    config_path.write_text(json.dumps(config))
+    joint = make_joint(base, converted_dataset)  # no --rename_map
+    joint.reset()
+    action = joint.select_action(observation([OOD_POSE, OOD_POSE]))  # the dataset's observation.image
+    assert action.shape == (2, 2) and torch.isfinite(action).all()
+
+
 def test_a_base_with_other_feature_shapes_is_refused(pusht_dataset, converted_dataset):
     base = renamed_base(pusht_dataset, pusht_dataset.with_name("base_3d_action"), "observation.image", 3)
     with pytest.raises(ValueError, match="disagree on feature shapes.*action: \\(3,\\) vs \\(2,\\)"):

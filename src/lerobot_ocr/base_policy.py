@@ -151,12 +151,18 @@ def mismatched_features(
 
 
 def missing_inputs_message(missing: list[str], available, what: str) -> str:
-    """A clear error for `missing_inputs`: the keys, what is there, and the `--rename_map` fix."""
+    """A clear error for `missing_inputs`: the keys, what is there, and the two ways to rename them.
+
+    lerobot-train refuses `--rename_map` for a policy it builds fresh (LeRobot 0.6.1,
+    `TrainPipelineConfig.validate`), so for training the map goes into the base's own preprocessor.
+    """
     example = ", ".join(f'"<your key>": "{key}"' for key in missing[:2])
     return (
         f"The base policy reads {missing}, which {what} does not provide (it has {sorted(available)}). "
-        f"If they are there under other names, map them with --rename_map='{{{example}}}' (lerobot-train "
-        "and lerobot-eval take it); otherwise wrap a base trained on the features you have."
+        f"If they are there under other names, map them: lerobot-eval takes --rename_map='{{{example}}}' "
+        "(lerobot-train too, when it starts from a checkpoint with --policy.path); to train a new ocr_joint, "
+        "put that map in the base itself: the rename_map of the 'rename_observations_processor' step in a "
+        "copy of the base's policy_preprocessor.json. Otherwise wrap a base trained on the features you have."
     )
 
 

@@ -157,12 +157,21 @@ def missing_inputs_message(missing: list[str], available, what: str) -> str:
     `TrainPipelineConfig.validate`), so for training the map goes into the base's own preprocessor.
     """
     example = ", ".join(f'"<your key>": "{key}"' for key in missing[:2])
+    in_base = (
+        f"put the map {{{example}}} in the base itself: the rename_map of the "
+        "'rename_observations_processor' step in a copy of the base's policy_preprocessor.json"
+    )
+    flag = f"--rename_map='{{{example}}}'"
+    ways = (
+        f"to train a new ocr_joint (lerobot-train refuses {flag} without a checkpoint), {in_base}; at "
+        f"evaluation lerobot-eval takes {flag}"
+        if what == "the dataset"
+        else f"lerobot-eval takes {flag}, or {in_base}"
+    )
     return (
         f"The base policy reads {missing}, which {what} does not provide (it has {sorted(available)}). "
-        f"If they are there under other names, map them: lerobot-eval takes --rename_map='{{{example}}}' "
-        "(lerobot-train too, when it starts from a checkpoint with --policy.path); to train a new ocr_joint, "
-        "put that map in the base itself: the rename_map of the 'rename_observations_processor' step in a "
-        "copy of the base's policy_preprocessor.json. Otherwise wrap a base trained on the features you have."
+        f"If they are there under other names, map them: {ways}. Otherwise wrap a base trained on the "
+        "features you have."
     )
 
 

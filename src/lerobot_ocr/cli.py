@@ -275,7 +275,8 @@ def build_parser() -> argparse.ArgumentParser:
     gen.add_argument(
         "--overwrite",
         action="store_true",
-        help="Replace a finished dataset at --root (an unfinished run resumes).",
+        help="Replace a finished dataset at --root, or an unfinished run's cache made with other settings "
+        "(else an unfinished run resumes).",
     )
     gen.set_defaults(func=_generate)
 

@@ -93,7 +93,8 @@ def collect_episodes(
     if ledger.get("params", params) != params:
         raise ValueError(
             f"{work} holds episodes generated with {ledger['params']}, not {params}. Use the same settings "
-            "to resume, or another --root."
+            "to resume, the overwrite option (generate: --overwrite; collect: --overwrite=true) to delete "
+            "these episodes and start over, or another --root."
         )
     ledger["params"] = params
     atomic_write(ledger_path, lambda p: p.write_text(json.dumps(ledger)))  # the settings, before any episode

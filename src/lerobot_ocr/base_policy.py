@@ -150,10 +150,11 @@ def mismatched_features(
     ]
 
 
-def missing_inputs_message(missing: list[str], available, what: str) -> str:
+def missing_inputs_message(missing: list[str], available, *, training: bool) -> str:
     """A clear error for `missing_inputs`: the keys, what is there, and the two ways to rename them.
 
-    lerobot-train refuses `--rename_map` for a policy it builds fresh (LeRobot 0.6.1,
+    `training`: the keys are missing from a dataset (a new ocr_joint being trained), else from an env's
+    observation. lerobot-train refuses `--rename_map` for a policy it builds fresh (LeRobot 0.6.1,
     `TrainPipelineConfig.validate`), so for training the map goes into the base's own preprocessor.
     """
     example = ", ".join(f'"<your key>": "{key}"' for key in missing[:2])
@@ -165,9 +166,10 @@ def missing_inputs_message(missing: list[str], available, what: str) -> str:
     ways = (
         f"to train a new ocr_joint (lerobot-train refuses {flag} without a checkpoint), {in_base}; at "
         f"evaluation lerobot-eval takes {flag}"
-        if what == "the dataset"
+        if training
         else f"lerobot-eval takes {flag}, or {in_base}"
     )
+    what = "the dataset" if training else "the observation"
     return (
         f"The base policy reads {missing}, which {what} does not provide (it has {sorted(available)}). "
         f"If they are there under other names, map them: {ways}. Otherwise wrap a base trained on the "

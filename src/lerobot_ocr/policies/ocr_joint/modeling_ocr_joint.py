@@ -177,7 +177,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             renames = chain_renames(active_rename_map(), self._base_renames)
             missing = missing_inputs(self.base, config.input_features, renames)
             if missing:
-                raise ValueError(missing_inputs_message(missing, config.input_features, "the dataset"))
+                raise ValueError(missing_inputs_message(missing, config.input_features, training=True))
             features = {**config.input_features, **config.output_features}
             mismatched = mismatched_features(self.base, features, renames)
             if mismatched:
@@ -470,7 +470,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         available = {k: v for k, v in batch.items() if k.startswith("observation") and hasattr(v, "shape")}
         missing = missing_inputs(self.base, available, self._base_renames)
         if missing:
-            raise KeyError(missing_inputs_message(missing, list(available), "the observation"))
+            raise KeyError(missing_inputs_message(missing, list(available), training=False))
         renamed = {self._base_renames.get(k, k): v for k, v in available.items()}
         wrong = [
             f"{key}: {tuple(ft.shape)} vs {tuple(renamed[key].shape[-len(ft.shape) :])}"

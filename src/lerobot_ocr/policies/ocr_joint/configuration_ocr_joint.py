@@ -59,6 +59,10 @@ class OcrJointConfig(PreTrainedConfig):
         calibration_quantile: share of training frames below the calibrated threshold. Default 0.02.
         threshold_margin: nats subtracted from the calibrated threshold (start frames are the rarest
             frames of a demo set; the margin keeps unseen ID starts on the base). Default 2.0.
+        handback_components: 0 (default, the paper's switch) or M: a recovering row hands back only once
+            the joint keypoint density (`lerobot_ocr.joint_density`, M components, calibrated like the
+            score) also says the object's whole pose is like the demos'; until then it is moved along
+            that density's translation gradient. Beyond the paper.
     Recovery
         magnitude: recovery vector magnitude, "log_deficit" (default) or "paper" (q(|grad p|)).
         step_size: alpha, object units the planned keypoints move per frame. Default 5.0.
@@ -96,6 +100,7 @@ class OcrJointConfig(PreTrainedConfig):
     threshold: float | None = None
     calibration_quantile: float = 0.02
     threshold_margin: float = 2.0
+    handback_components: int = 0
 
     # Recovery vector and planner.
     magnitude: str = "log_deficit"

@@ -50,6 +50,7 @@ from lerobot_ocr.base_policy import (
 from lerobot_ocr.dataset_columns import episode_last_positions, read_columns, window_positions
 from lerobot_ocr.geometry import pose_defects, pose_to_matrix
 from lerobot_ocr.inverse_policy import KeypointInversePolicy
+from lerobot_ocr.joint_density import JointKeypointDensity
 from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
 from lerobot_ocr.manifold import KeypointManifold, RecoveryOutput
 from lerobot_ocr.planner import RecoveryPlanner
@@ -70,6 +71,7 @@ class Observed(NamedTuple):
     keypoints: torch.Tensor  # (B, K, D)
     state: torch.Tensor  # (B, S) robot state
     recovery: RecoveryOutput  # score (B,), recovery vector (B, D), ...
+    joint_ok: torch.Tensor | None = None  # (B,) bool: the joint density's hand-back test passes
 
 
 class OcrJointPolicy(PreTrainedPolicy):
@@ -129,6 +131,11 @@ class OcrJointPolicy(PreTrainedPolicy):
             score_type=config.score_type,
             n_keypoints=k,
             dim=d,
+        )
+        self.joint_density = (
+            JointKeypointDensity(config.handback_components, n_keypoints=k, dim=d)
+            if config.handback_components
+            else None
         )
         self.inverse = KeypointInversePolicy(
             k,
@@ -298,6 +305,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             raise ValueError(f"{e} This dataset's {cfg.object_pose_key}: {self._pose_source}.") from e
         self.calibrated_threshold_.fill_(float(self.manifold.threshold_))
         self.apply_threshold()
+        self.fit_joint_density(self._tbl_keypoints)
         n = len(self._tbl_index)
         gen = torch.Generator().manual_seed(0)
         starts = torch.randperm(n, generator=gen)[: cfg.max_normalization_windows]
@@ -310,6 +318,15 @@ class OcrJointPolicy(PreTrainedPolicy):
             float(self.manifold.threshold_),
             cfg.score_type,
         )
+
+    @torch.no_grad()
+    def fit_joint_density(self, keypoints: torch.Tensor) -> None:
+        """Fit and calibrate the joint keypoint density on (N, K, D) training keypoints (if configured)."""
+        cfg = self.config
+        if self.joint_density is not None:
+            self.joint_density.fit(keypoints.double()).calibrate(
+                keypoints.double(), cfg.calibration_quantile, cfg.threshold_margin
+            )
 
     def apply_threshold(self) -> float:
         """Set the switch threshold: `threshold` if given, else the calibrated one - `threshold_margin`."""
@@ -402,12 +419,15 @@ class OcrJointPolicy(PreTrainedPolicy):
         check_finite(
             state, cfg.state_key, "The robot state is missing or invalid; check the robot's readings."
         )
-        return Observed(
-            frames,
-            keypoints,
-            state,
-            self.manifold.recovery(keypoints.double(), magnitude=cfg.magnitude),
-        )
+        recovery = self.manifold.recovery(keypoints.double(), magnitude=cfg.magnitude)
+        joint_ok = None
+        if self.joint_density is not None:
+            joint_score, joint_grad = self.joint_density._evaluate(keypoints.double())
+            joint_ok = joint_score >= self.joint_density.threshold_
+            # in distribution keypoint by keypoint but not as a whole: move along the joint density
+            deeper = ~recovery.is_ood & ~joint_ok
+            recovery.vector = torch.where(deeper[:, None], joint_grad.to(recovery.vector), recovery.vector)
+        return Observed(frames, keypoints, state, recovery, joint_ok)
 
     def _distance(self, state: torch.Tensor, keypoints: torch.Tensor) -> torch.Tensor:
         """(B,) distance from the end effector to the nearest object keypoint (0 if unknown)."""
@@ -451,7 +471,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             self._new_chunks = None
             return self._unchecked
         score = obs.recovery.score.to(device)
-        decision = decide(score, float(self.manifold.threshold_), self._switch)
+        decision = decide(score, float(self.manifold.threshold_), self._switch, obs.joint_ok)
         if bool(decision.needs_chunk.any()):
             self._plan_chunks(obs, decision.needs_chunk, noise)
         if bool(decision.hand_back.any()):

@@ -85,13 +85,16 @@ def needs_check(state: SwitchState, base_queued: int | None) -> bool:
     return state.n_recovering > 0 or not base_queued
 
 
-def decide(score: torch.Tensor, threshold: float, state: SwitchState) -> Decision:
+def decide(
+    score: torch.Tensor, threshold: float, state: SwitchState, handback_ok: torch.Tensor | None = None
+) -> Decision:
     """The switch for one step: (B,) scores (NaN = not evaluated), the threshold and the state -> Decision.
 
     A recovering row whose chunk has run (`actions_left == 0`) hands back when score >= threshold,
     else it needs a new chunk; a row on the base enters recovery (and needs a chunk) when score <
     threshold. A NaN score decides nothing: a row on the base stays there, a recovering row goes on
-    with its chunk.
+    with its chunk. `handback_ok` ((B,) bool, optional) is a second test a recovering row must also pass
+    to hand back (the joint keypoint density's); entering is the score's alone.
 
     Raises:
         ValueError: `score` is not (B,) for the state's B rows, or is NaN for a recovering row whose
@@ -106,6 +109,8 @@ def decide(score: torch.Tensor, threshold: float, state: SwitchState) -> Decisio
     if bool((chunk_done & score.isnan()).any()):
         raise ValueError("A recovering row whose chunk has run needs a score (got NaN): score every row.")
     hand_back = chunk_done & (score >= threshold)
+    if handback_ok is not None:
+        hand_back = hand_back & handback_ok.to(hand_back.device)
     enter = ~state.recovering & (score < threshold)
     recovering = (state.recovering & ~hand_back) | enter
     return Decision(recovering, enter, hand_back, enter | (chunk_done & ~hand_back))

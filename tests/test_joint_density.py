@@ -32,7 +32,9 @@ def se2():
 
 def test_a_turned_object_where_the_demos_held_it_straight_scores_low(se2):
     density, spec = se2
-    straight, turned, turned_left = keypoints_of([[256, 256, 0.0], [256, 256, np.pi], [120, 256, np.pi]], spec, "angle")
+    straight, turned, turned_left = keypoints_of(
+        [[256, 256, 0.0], [256, 256, np.pi], [120, 256, np.pi]], spec, "angle"
+    )
     score = density.score(torch.from_numpy(np.stack([straight, turned, turned_left])))
     assert score[0] > density.threshold_  # the demos' pose: in distribution
     assert score[1] < density.threshold_  # same place, turned: never seen
@@ -54,12 +56,16 @@ def test_se3_a_turned_object_scores_low_and_the_fit_round_trips(tmp_path):
     poses = np.c_[rng.normal([0.1, 0.2, 0.9], 0.01, (n, 3)), quat_id]
     kps = pose_to_keypoints(pose_to_matrix(poses, "quat_wxyz"), spec)
     density = JointKeypointDensity(n_components=4).fit(kps).calibrate(torch.from_numpy(kps))
-    half_turn = pose_to_keypoints(pose_to_matrix(np.array([[0.1, 0.2, 0.9, 0.0, 0.0, 0.0, 1.0]]), "quat_wxyz"), spec)
+    half_turn = pose_to_keypoints(
+        pose_to_matrix(np.array([[0.1, 0.2, 0.9, 0.0, 0.0, 0.0, 1.0]]), "quat_wxyz"), spec
+    )
     assert density.score(torch.from_numpy(kps[:1])) > density.threshold_
     assert density.score(torch.from_numpy(half_turn)) < density.threshold_
     loaded = JointKeypointDensity(n_components=4, n_keypoints=spec.shape[0], dim=3)
     loaded.load_state_dict(density.state_dict())
-    assert torch.allclose(loaded.score(torch.from_numpy(half_turn)), density.score(torch.from_numpy(half_turn)))
+    assert torch.allclose(
+        loaded.score(torch.from_numpy(half_turn)), density.score(torch.from_numpy(half_turn))
+    )
 
 
 def test_unfitted_and_bad_input_raise():

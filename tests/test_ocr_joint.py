@@ -312,3 +312,29 @@ def test_a_new_batch_size_starts_new_episodes_and_reset_always_works(joint, id_p
     joint.reset()
     assert joint.completed_stats[-1]["started_ood"] == [False, True, False]
     assert joint.ocr_stats() == {"steps": 0}
+
+
+def test_the_joint_handback_density_is_fitted_at_training_and_saved(
+    diffusion_base, converted_dataset, tmp_path
+):
+    from lerobot.configs import PreTrainedConfig
+    from lerobot.policies.factory import get_policy_class
+
+    policy = make_joint(diffusion_base, converted_dataset, handback_components=3)
+    density = policy.joint_density
+    assert bool(density.fitted_) and torch.isfinite(density.threshold_)
+    scores = density.score(policy._tbl_keypoints.double())
+    assert (scores < density.threshold_).float().mean().item() <= 0.03  # 2% quantile minus the margin
+    ood = policy._observe(observation([OOD_POSE]))
+    assert not ood.joint_ok.item()  # the right half: the demos never held the T there in any turn
+    policy.save_pretrained(tmp_path / "ckpt")
+    loaded = get_policy_class("ocr_joint").from_pretrained(tmp_path / "ckpt")
+    assert loaded.config.handback_components == 3
+    assert loaded.joint_density.threshold_ == density.threshold_
+    torch.testing.assert_close(loaded.joint_density.score(policy._tbl_keypoints[:5].double()), scores[:5])
+    # a checkpoint trained without it cannot be evaluated with it: a clear error, not an unfitted density
+    make_joint(diffusion_base, converted_dataset).save_pretrained(tmp_path / "plain")
+    cfg = PreTrainedConfig.from_pretrained(tmp_path / "plain")
+    cfg.handback_components = 3
+    with pytest.raises(ValueError, match="trained without the joint hand-back density"):
+        get_policy_class("ocr_joint").from_pretrained(tmp_path / "plain", config=cfg)

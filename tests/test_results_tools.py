@@ -203,3 +203,51 @@ def test_a_finished_cell_stands_as_a_probe_only_if_its_batches_are_of_that_check
         probe.cell_command(SQUARE, ckpt, "ood", profile | {"episodes": 10}, cell, [])
     with pytest.raises(ValueError, match="drop the change"):
         probe.cell_command(SQUARE, ckpt, "ood", profile, cell, ["--policy.grasp_delay=0"])
+
+
+def test_the_pusht_failure_replay_reproduces_a_recorded_episode(tmp_path):
+    """A batch recorded as an eval cell records it (an expert's successful OOD episode and an agent that holds
+    still) is re-simulated from its seeds and actions: the success step matches and the poses are read."""
+    import numpy as np
+    import pusht_failures
+    import torch
+
+    from lerobot_ocr.envs.pusht_env import make_pusht_ocr_env
+    from lerobot_ocr.eval_resume import BatchRecords
+    from lerobot_ocr.experts.pusht_expert import run_expert_episode
+
+    env = make_pusht_ocr_env(max_episode_steps=300, obs_type="environment_state_agent_pos", region="ood")
+    episode = run_expert_episode(env, seed=100000)
+    assert episode["success"]
+    n = episode["length"]
+    t = n + 150  # long enough for the still row to come to rest (its start overlaps the agent)
+    action = np.zeros((2, t, 2))
+    action[0, :n] = [s["action"] for s in episode["steps"]]
+    action[0, n:] = action[0, n - 1]
+    obs, _ = env.reset(seed=100001)
+    action[1] = obs["agent_pos"]  # holds still where it starts: the T never moves
+    success = np.zeros((2, t), bool)
+    success[0, n - 1 :] = True
+    done = success.copy()
+    done[1, -1] = True
+    in_recovery = np.zeros((t, 2), bool)
+    in_recovery[:20, 0] = True  # row 0 recovers 20 steps, then the base; row 1 starts on the base
+    decisions = np.zeros((t, 2), bool)
+    decisions[::8] = True
+    records = BatchRecords(tmp_path, "key", resume=False)
+    rollout = {n_: torch.as_tensor(v) for n_, v in (("action", action), ("success", success), ("done", done))}
+    records.save(
+        0, rollout, {"steps": t, "in_recovery": in_recovery, "decisions": decisions}, 8, [100000, 100001], 1.0
+    )
+    rows = pusht_failures.episodes(tmp_path, episode_length=t, decision_budget=60)
+    assert [r["seed"] for r in rows] == [100000, 100001]
+    r0, r1 = rows
+    assert r0["success_step"] == r0["replay_success_step"] == n and r0["solved_episode"]
+    assert (r0["started_ood"], r0["first_base_step"], r0["entries"]) == (True, 20, 1)
+    env.reset(seed=100000)
+    for a in action[0, :20]:
+        obs, *_ = env.step(a)
+    pose = obs["object_pose"]
+    assert abs(r0["handback_goal_distance"] - float(np.linalg.norm(pose[:2] - 256.0))) < 1e-6
+    assert (r1["success_step"], r1["replay_success_step"], r1["started_ood"]) == (-1, -1, False)
+    assert r1["tail_motion"] < 1e-6 and r1["steps"] == t

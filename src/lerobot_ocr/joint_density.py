@@ -59,7 +59,9 @@ class JointKeypointDensity(nn.Module):
         self.register_buffer("mean_", torch.zeros(f, dtype=f64))
         self.register_buffer("scale_", torch.ones(f, dtype=f64))
         self.register_buffer("means_", torch.zeros(n_components, f, dtype=f64))
-        self.register_buffer("precisions_cholesky_", torch.eye(f, dtype=f64).expand(n_components, f, f).clone())
+        self.register_buffer(
+            "precisions_cholesky_", torch.eye(f, dtype=f64).expand(n_components, f, f).clone()
+        )
         self.register_buffer("log_coef_", torch.zeros(n_components, dtype=f64))
         self.register_buffer("threshold_", torch.tensor(float("nan"), dtype=f64))
         self.register_buffer("fitted_", torch.tensor(False))
@@ -85,7 +87,10 @@ class JointKeypointDensity(nn.Module):
         flat = x.reshape(n, k * d)
         mean, scale = flat.mean(0), flat.std(0).clip(min=1e-12)
         gmm = GaussianMixture(
-            self.n_components, covariance_type="full", reg_covar=self.reg_covar, random_state=self.random_state
+            self.n_components,
+            covariance_type="full",
+            reg_covar=self.reg_covar,
+            random_state=self.random_state,
         ).fit((flat - mean) / scale)
         t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float64)  # noqa: E731
         self.n_keypoints, self.dim = k, d
@@ -119,7 +124,9 @@ class JointKeypointDensity(nn.Module):
         """(B, K, D) -> (B, D): d log p / d t for all keypoints moved by one translation t."""
         return self._evaluate(keypoints)[1]
 
-    def calibrate(self, keypoints: torch.Tensor, quantile: float = 0.02, margin: float = 2.0) -> JointKeypointDensity:
+    def calibrate(
+        self, keypoints: torch.Tensor, quantile: float = 0.02, margin: float = 2.0
+    ) -> JointKeypointDensity:
         """threshold_ = the `quantile` of the training frames' scores minus `margin` nats; return self."""
         scores = torch.cat([self.score(c) for c in torch.as_tensor(keypoints).split(4096)])
         self.threshold_ = (torch.quantile(scores, quantile) - margin).to(torch.float64)

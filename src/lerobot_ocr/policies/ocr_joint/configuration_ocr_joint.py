@@ -163,6 +163,11 @@ class OcrJointConfig(PreTrainedConfig):
             raise ValueError(f"--policy.n_recovery_action_steps must be in [1, horizon={self.horizon}].")
         if not self.reg_covar > 0:
             raise ValueError(f"--policy.reg_covar must be > 0 (squared object units), got {self.reg_covar}.")
+        if self.handback_components < 0:
+            raise ValueError(
+                f"--policy.handback_components must be 0 (off) or a number of mixture components, got "
+                f"{self.handback_components}."
+            )
         if not self.d_max > self.d_min:
             raise ValueError(f"Need d_max > d_min, got d_min={self.d_min}, d_max={self.d_max}.")
         if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:

@@ -657,6 +657,13 @@ class OcrJointPolicy(PreTrainedPolicy):
         instance = cls(config, bundle_dir=path, **kwargs)
         instance._processor_dir = path  # its processors (with any rename map) go along when re-saved
         cls._load_as_safetensor(instance, os.path.join(path, MODEL_FILE), config.device, strict)
+        if instance.joint_density is not None and not bool(instance.joint_density.fitted_):
+            raise ValueError(
+                f"{path} was trained without the joint hand-back density, so "
+                f"--policy.handback_components={config.handback_components} has nothing to load: train the "
+                "ocr_joint policy with it (lerobot-train ... --policy.handback_components=M), or evaluate "
+                "with --policy.handback_components=0."
+            )
         instance.apply_threshold()  # run-time overrides: --policy.threshold / --policy.threshold_margin
         instance.to(config.device)
         instance.eval()

@@ -38,6 +38,7 @@ def main() -> None:
 
     config = PreTrainedConfig.from_pretrained(args.policy_path)
     config.handback_components = 0  # load as trained, then add the density
+    config.device = "cpu"
     policy = OcrJointPolicy.from_pretrained(args.policy_path, config=config)
     pose = read_columns(args.dataset_root, [config.object_pose_key])[config.object_pose_key]
     keypoints = policy._keypoints(policy._pose_matrix(torch.as_tensor(pose, dtype=torch.float32)))

@@ -5,7 +5,8 @@
 `lerobot-ocr eval` keeps each batch's actions, success flags and the switch's modes (`batches/`), not the
 T's poses. Push-T's physics is deterministic given the seed and the actions, so this re-simulates every
 episode with its recorded actions (checking that the replay succeeds at the recorded step) and reads the
-T's pose where it matters: at the first hand-back and at the end. Per episode it reports the T's distance
+T's pose where it matters: at the first hand-back (NaN for episodes that start on the base or never hand
+back) and at the end. Per episode it reports the T's distance
 to the goal (px, centre), its angle error (degrees), the keypoint error to the goal pose (px, the
 expert's `pose_error`), how far the T moved over the last 100 steps (a stall), and how many times the
 switch entered recovery; then it compares the successes and failures within the reference's budget.
@@ -34,13 +35,13 @@ def angle_error(theta: np.ndarray) -> np.ndarray:
     return np.degrees(np.abs(d))
 
 
-def replay(seed: int, actions: np.ndarray, steps: int, episode_length: int) -> dict:
+def replay(seed: int, actions: np.ndarray, steps: int, episode_length: int, region: str = "ood") -> dict:
     """Re-simulate one episode: (T, 2) actions, the first `steps` of them -> poses (steps+1, 3),
     agent (steps+1, 2), reward (steps,)."""
     from lerobot_ocr.envs.pusht_env import make_pusht_ocr_env
 
     env = make_pusht_ocr_env(
-        max_episode_steps=episode_length, obs_type="environment_state_agent_pos", region="ood"
+        max_episode_steps=episode_length, obs_type="environment_state_agent_pos", region=region
     )
     obs, _ = env.reset(seed=seed)
     poses, agent, reward = [obs["object_pose"]], [obs["agent_pos"]], []
@@ -53,8 +54,12 @@ def replay(seed: int, actions: np.ndarray, steps: int, episode_length: int) -> d
     return {"pose": np.array(poses), "agent": np.array(agent), "reward": np.array(reward)}
 
 
-def episodes(cell: Path, episode_length: int, decision_budget: int) -> list[dict]:
-    """Every recorded episode of `cell` replayed and measured."""
+def episodes(cell: Path, episode_length: int, decision_budget: int, region: str = "ood") -> list[dict]:
+    """Every recorded episode of `cell` (its env `region`) replayed and measured.
+
+    Raises:
+        ValueError: a batch recorded without seeds (an unseeded eval cannot be replayed).
+    """
     from lerobot_ocr.experts.pusht_expert import pose_error
 
     out = []
@@ -63,16 +68,21 @@ def episodes(cell: Path, episode_length: int, decision_budget: int) -> list[dict
             meta = json.loads(str(z["meta"]))
             actions, success, done = z["rollout.action"], z["rollout.success"], z["rollout.done"]
             modes, decisions = z["stats.in_recovery"], z["stats.decisions"]
+        if meta["seeds"] is None:
+            raise ValueError(
+                f"{f} was recorded without env seeds: only a seeded eval (--seed) can be replayed."
+            )
         steps, succ = episode_steps(done), success_steps(success)
         dec = decisions_at(succ, decisions)
         for b, seed in enumerate(meta["seeds"]):
             n = steps[b]
-            rep = replay(seed, actions[b], n, episode_length)
+            rep = replay(seed, actions[b], n, episode_length, region)
             replayed = np.nonzero(rep["reward"] >= 1.0 - 1e-9)[0]
             rec = modes[:n, b].astype(bool)
+            # -1: never on the base; 0: started on the base (no hand-back)
             first_base = int(np.argmin(rec)) if rec[0] and not rec.all() else (0 if not rec[0] else -1)
             pose = rep["pose"]
-            at = pose[first_base] if first_base >= 0 else pose[-1]
+            at = pose[first_base] if first_base > 0 else np.full(3, np.nan)
             end = pose[-1]
             tail = pose[max(0, len(pose) - 101) :, :2]
             out.append(
@@ -89,7 +99,7 @@ def episodes(cell: Path, episode_length: int, decision_budget: int) -> list[dict
                     "recovery_fraction": float(rec.mean()),
                     "handback_goal_distance": float(np.linalg.norm(at[:2] - PUSHT_GOAL_POSE[:2])),
                     "handback_angle_error": float(angle_error(at[2])),
-                    "handback_pose_error": float(pose_error(at)),
+                    "handback_pose_error": float(pose_error(at)) if np.isfinite(at).all() else float("nan"),
                     "end_goal_distance": float(np.linalg.norm(end[:2] - PUSHT_GOAL_POSE[:2])),
                     "end_angle_error": float(angle_error(end[2])),
                     "end_pose_error": float(pose_error(end)),
@@ -103,10 +113,12 @@ def episodes(cell: Path, episode_length: int, decision_budget: int) -> list[dict
 
 
 def describe(rows: list[dict], keys: tuple[str, ...]) -> dict:
-    """Median (p25, p75) of each key over `rows`."""
+    """(p25, median, p75) of each key over `rows`, leaving out NaN (and a first_base_step of -1 or 0: no
+    hand-back)."""
     out = {"n": len(rows)}
     for k in keys:
         v = np.array([r[k] for r in rows], dtype=float)
+        v = v[np.isfinite(v) & ((v > 0) if k == "first_base_step" else True)]
         out[k] = [round(float(x), 1) for x in np.percentile(v, [25, 50, 75])] if len(v) else None
     return out
 
@@ -116,9 +128,10 @@ def main() -> None:
     parser.add_argument("--cell", required=True, help="a joint eval cell's --output_dir (with batches/)")
     parser.add_argument("--episode-length", type=int, default=960)
     parser.add_argument("--decision-budget", type=int, default=60)
+    parser.add_argument("--region", default="ood", help="the cell's --env.region")
     parser.add_argument("--out", default=None, help="write the per-episode rows and the summary here")
     args = parser.parse_args()
-    rows = episodes(Path(args.cell), args.episode_length, args.decision_budget)
+    rows = episodes(Path(args.cell), args.episode_length, args.decision_budget, args.region)
     mismatched = [r["seed"] for r in rows if r["success_step"] != r["replay_success_step"]]
     keys = ("first_base_step", "handback_goal_distance", "handback_angle_error", "handback_pose_error",
             "end_goal_distance", "end_angle_error", "end_pose_error", "tail_motion", "entries",

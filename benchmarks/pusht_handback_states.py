@@ -8,9 +8,10 @@ components, calibration, margin) and the joint keypoint density (`--components`)
 then moves each flagged OOD start (seeds 100000+i, i < 200) exactly along the plan, `--chunk-px` per chunk,
 until it hands back: (a) the paper's test, along the per-keypoint recovery vector; (b) with the joint
 test too, along the joint density's translation gradient once the per-keypoint test passes. For both it
-gives the chunks needed and the T's RMS keypoint distance to its 5 nearest demo frames, then runs the base
-from the first `--episodes` hand-back states of each (the T where the test handed it back, the agent just
-behind it along the last push, LeRobot's own rollout, `--steps` steps) and counts its successes.
+gives the chunks needed and the T's RMS keypoint distance to its 5 nearest demo frames (over the starts it
+hands back), then runs the base from the hand-back states of the first `--episodes` starts that both tests
+hand back (the same starts for both: the T where the test handed it back, the agent just behind it along
+the last push, LeRobot's own rollout, `--steps` steps) and counts its successes.
 Writes `benchmarks/results/pusht_handback_states.json`; the reading is in `benchmarks/EXPERIMENTS.md`
 ("A hand-back that needs the whole pose").
 """
@@ -146,7 +147,11 @@ def main() -> None:
     workdir = Path(args.workdir)
     cfg = json.loads((REPO / "configs" / "policy" / "ocr_joint_pusht.json").read_text())["policy"]
     _, kps = demo_keypoints(workdir)
-    manifold = KeypointManifold(n_components=cfg["n_components"]).fit(kps, cfg["calibration_quantile"])
+    manifold = KeypointManifold(
+        n_components=cfg["n_components"],
+        reg_covar=cfg.get("reg_covar", 1e-6),
+        score_type=cfg.get("score_type", "mean_log_density"),
+    ).fit(kps, cfg["calibration_quantile"])
     manifold.set_threshold(float(manifold.threshold_) - cfg["threshold_margin"])
     joint = JointKeypointDensity(args.components).fit(kps)
     joint.calibrate(torch.from_numpy(kps), cfg["calibration_quantile"], cfg["threshold_margin"])

@@ -48,6 +48,17 @@ def test_the_translation_gradient_leads_to_where_the_demos_held_that_turn(se2):
     assert grad[0] < 0 and abs(grad[0]) > 3 * abs(grad[1])  # toward x = 120, not toward the goal
 
 
+def test_the_translation_gradient_is_the_derivative_of_the_score(se2):
+    density, spec = se2
+    kp = torch.from_numpy(keypoints_of([[200, 240, 2.0]], spec, "angle"))
+    eps = 1e-3
+    numeric = [
+        (density.score(kp + eps * e) - density.score(kp - eps * e)) / (2 * eps)
+        for e in torch.eye(2, dtype=torch.float64)
+    ]
+    torch.testing.assert_close(density.translation_gradient(kp)[0], torch.cat(numeric), rtol=1e-4, atol=1e-6)
+
+
 def test_se3_a_turned_object_scores_low_and_the_fit_round_trips(tmp_path):
     rng = np.random.default_rng(1)
     spec = axis_tip_keypoints(0.05, dim=3)
@@ -75,6 +86,9 @@ def test_unfitted_and_bad_input_raise():
         JointKeypointDensity(8).fit(np.zeros((4, 3, 2)))
     with pytest.raises(ValueError, match=r"\(N, K, D\)"):
         JointKeypointDensity(2).fit(np.zeros((10, 6)))
+    fitted = JointKeypointDensity(2).fit(np.random.default_rng(0).normal(size=(50, 3, 2)))
+    with pytest.raises(ValueError, match=r"\(B, 3, 2\)"):
+        fitted.score(torch.zeros(1, 4, 2))
 
 
 def test_the_switch_hands_back_only_when_the_second_test_passes_too():

@@ -251,3 +251,4 @@ def test_the_pusht_failure_replay_reproduces_a_recorded_episode(tmp_path):
     assert abs(r0["handback_goal_distance"] - float(np.linalg.norm(pose[:2] - 256.0))) < 1e-6
     assert (r1["success_step"], r1["replay_success_step"], r1["started_ood"]) == (-1, -1, False)
     assert r1["tail_motion"] < 1e-6 and r1["steps"] == t
+    assert r1["first_base_step"] == 0 and np.isnan(r1["handback_goal_distance"])  # no hand-back to read

@@ -335,6 +335,8 @@ class OcrJointPolicy(PreTrainedPolicy):
             self.manifold.set_threshold(cfg.threshold)
         elif bool(torch.isfinite(self.calibrated_threshold_)):
             self.manifold.set_threshold(float(self.calibrated_threshold_) - cfg.threshold_margin)
+        if self.joint_density is not None:  # the joint test takes the same margin (not `threshold`)
+            self.joint_density.set_margin(cfg.threshold_margin)
         return float(self.manifold.threshold_)
 
     def forward(self, batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, None]:
@@ -422,7 +424,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         recovery = self.manifold.recovery(keypoints.double(), magnitude=cfg.magnitude)
         joint_ok = None
         if self.joint_density is not None:
-            joint_score, joint_grad = self.joint_density._evaluate(keypoints.double())
+            joint_score, joint_grad = self.joint_density.score_and_gradient(keypoints.double())
             joint_ok = joint_score >= self.joint_density.threshold_
             # in distribution keypoint by keypoint but not as a whole: move along the joint density
             deeper = ~recovery.is_ood & ~joint_ok
@@ -656,7 +658,16 @@ class OcrJointPolicy(PreTrainedPolicy):
             config = PreTrainedConfig.from_pretrained(path, **kwargs)
         instance = cls(config, bundle_dir=path, **kwargs)
         instance._processor_dir = path  # its processors (with any rename map) go along when re-saved
-        cls._load_as_safetensor(instance, os.path.join(path, MODEL_FILE), config.device, strict)
+        try:
+            cls._load_as_safetensor(instance, os.path.join(path, MODEL_FILE), config.device, strict)
+        except RuntimeError as e:
+            if instance.joint_density is None or "joint_density" not in str(e):
+                raise
+            raise ValueError(
+                f"{path} holds a joint hand-back density of another size than "
+                f"--policy.handback_components={config.handback_components}: evaluate with the value it "
+                "was trained with (its config.json), or 0 to leave the joint test out."
+            ) from e
         if instance.joint_density is not None and not bool(instance.joint_density.fitted_):
             raise ValueError(
                 f"{path} was trained without the joint hand-back density, so "

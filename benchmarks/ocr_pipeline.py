@@ -97,8 +97,10 @@ def diagnosis_text(d: dict | None) -> str:
 
 
 def main(task: Task) -> None:
+    from lerobot_ocr.cli import quiet_known_warnings
     from lerobot_ocr.eval_report import format_table
 
+    quiet_known_warnings()  # LeRobot's torchcodec traceback in one line, as `lerobot-ocr` prints it
     args = parse_args(task)
     p = args.settings
     work = Path(args.workdir or REPO / "outputs" / f"{task.name}_ocr_{args.profile}").resolve()

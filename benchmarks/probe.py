@@ -129,6 +129,9 @@ def cell_command(
 
 
 def main() -> None:
+    from lerobot_ocr.cli import quiet_known_warnings
+
+    quiet_known_warnings()  # LeRobot's torchcodec traceback in one line, as `lerobot-ocr` prints it
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "--name", required=True, help="this probe's name (unique; a later probe may use it as --baseline)"

@@ -101,3 +101,5 @@ def test_the_switch_hands_back_only_when_the_second_test_passes_too():
     # entering is the score's alone: the second test does not keep an in-distribution row off the base
     fresh = decide(torch.tensor([1.0], dtype=torch.float64), 0.0, SwitchState.start(1), torch.tensor([False]))
     assert not fresh.enter.item() and not fresh.recovering.item()
+    with pytest.raises(ValueError, match=r"handback_ok has shape \(1,\), expected \(2,\)"):
+        decide(torch.tensor([1.0, 1.0], dtype=torch.float64), 0.0, state, torch.tensor([True]))

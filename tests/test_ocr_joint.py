@@ -340,8 +340,16 @@ def test_the_joint_handback_density_is_fitted_at_training_and_saved(
     assert not seen.recovery.is_ood.item() and not seen.joint_ok.item()
     kp = policy._keypoints(policy._pose_matrix(inside["observation.object_pose"])).double()
     torch.testing.assert_close(seen.recovery.vector, density.translation_gradient(kp))
+    planner, planned = policy.planner, []
+    policy.planner = lambda keypoints, vector, distance: planned.append(vector) or planner(
+        keypoints, vector, distance
+    )
     policy.select_action(inside)
+    policy.planner = planner
     assert policy.ocr_stats()["in_recovery"][-1].tolist() == [True]  # the paper's switch would hand back
+    # the new chunk is planned along the joint gradient, not the per-keypoint vector
+    torch.testing.assert_close(planned[0].double(), density.translation_gradient(kp))
+    assert not torch.allclose(planned[0].double(), policy.manifold.recovery(kp).vector)
     density.set_margin(2.0)
     policy.select_action(inside)
     policy.select_action(inside)
@@ -359,6 +367,11 @@ def test_the_joint_handback_density_is_fitted_at_training_and_saved(
     cfg.handback_components = 5
     with pytest.raises(ValueError, match="another size"):
         get_policy_class("ocr_joint").from_pretrained(tmp_path / "ckpt", config=cfg)
+    # a density without a calibrated threshold would never hand back: refused at load, not run forever
+    density.calibrated_threshold_.fill_(float("nan"))
+    policy.save_pretrained(tmp_path / "uncalibrated")
+    with pytest.raises(ValueError, match="without a calibrated threshold"):
+        get_policy_class("ocr_joint").from_pretrained(tmp_path / "uncalibrated")
     # a checkpoint trained without it cannot be evaluated with it: a clear error, not an unfitted density
     make_joint(diffusion_base, converted_dataset).save_pretrained(tmp_path / "plain")
     cfg = PreTrainedConfig.from_pretrained(tmp_path / "plain")

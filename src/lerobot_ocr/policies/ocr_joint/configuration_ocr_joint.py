@@ -62,7 +62,8 @@ class OcrJointConfig(PreTrainedConfig):
         handback_components: 0 (default, the paper's switch) or M: a recovering row hands back only once
             the joint keypoint density (`lerobot_ocr.joint_density`, M components, calibrated like the
             score) also says the object's whole pose is like the demos'; until then it is moved along
-            that density's translation gradient. Beyond the paper.
+            that density's translation gradient. Its mixture is fitted in standardised coordinates with
+            its own reg_covar (1e-3), not `reg_covar`. Beyond the paper.
     Recovery
         magnitude: recovery vector magnitude, "log_deficit" (default) or "paper" (q(|grad p|)).
         step_size: alpha, object units the planned keypoints move per frame. Default 5.0.

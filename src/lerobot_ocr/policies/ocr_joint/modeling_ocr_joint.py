@@ -554,7 +554,9 @@ class OcrJointPolicy(PreTrainedPolicy):
         recovery actions for OOD rows, the base's chunk for the others.
 
         Call it once per observation: a queue-based base (diffusion, VQ-BeT) adds the observation to
-        its history, as its `select_action` would. The switch's per-row state is not used.
+        its history, as its `select_action` would. The switch's per-row state is not used, so neither
+        is the joint hand-back test (`handback_components`), which only keeps rows that already
+        recover from handing back: a row recovers exactly when its keypoints score out of distribution.
         """
         state = batch[self.config.state_key]
         self._start_rows(1 if state.ndim == 1 else state.shape[0], state.device)
@@ -661,7 +663,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         try:
             cls._load_as_safetensor(instance, os.path.join(path, MODEL_FILE), config.device, strict)
         except RuntimeError as e:
-            if instance.joint_density is None or "joint_density" not in str(e):
+            if instance.joint_density is None or "size mismatch for joint_density." not in str(e):
                 raise
             raise ValueError(
                 f"{path} holds a joint hand-back density of another size than "
@@ -674,6 +676,14 @@ class OcrJointPolicy(PreTrainedPolicy):
                 f"--policy.handback_components={config.handback_components} has nothing to load: train the "
                 "ocr_joint policy with it (lerobot-train ... --policy.handback_components=M), or evaluate "
                 "with --policy.handback_components=0."
+            )
+        if instance.joint_density is not None and not bool(
+            torch.isfinite(instance.joint_density.calibrated_threshold_)
+        ):  # no row could ever pass the joint test: recovery would never hand back
+            raise ValueError(
+                f"{path} holds a joint hand-back density without a calibrated threshold (written before "
+                "2026-12-03, or fitted without calibrate()): re-fit it on the training keypoints "
+                "(benchmarks/add_handback_density.py), or evaluate with --policy.handback_components=0."
             )
         instance.apply_threshold()  # run-time overrides: --policy.threshold / --policy.threshold_margin
         instance.to(config.device)

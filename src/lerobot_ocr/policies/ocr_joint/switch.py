@@ -97,8 +97,8 @@ def decide(
     to hand back (the joint keypoint density's); entering is the score's alone.
 
     Raises:
-        ValueError: `score` is not (B,) for the state's B rows, or is NaN for a recovering row whose
-            chunk has run (it has no action left, so it must be scored).
+        ValueError: `score` (or `handback_ok`) is not (B,) for the state's B rows, or `score` is NaN
+            for a recovering row whose chunk has run (it has no action left, so it must be scored).
     """
     if score.shape != state.recovering.shape:
         raise ValueError(
@@ -110,6 +110,11 @@ def decide(
         raise ValueError("A recovering row whose chunk has run needs a score (got NaN): score every row.")
     hand_back = chunk_done & (score >= threshold)
     if handback_ok is not None:
+        if handback_ok.shape != state.recovering.shape:
+            raise ValueError(
+                f"handback_ok has shape {tuple(handback_ok.shape)}, expected ({state.batch_size},): one "
+                "per row."
+            )
         hand_back = hand_back & handback_ok.to(hand_back.device)
     enter = ~state.recovering & (score < threshold)
     recovering = (state.recovering & ~hand_back) | enter

@@ -2,10 +2,11 @@
 
 `tests/data/pinned_joint_actions.json` is written by this file (`python tests/test_ocr_joint_pinned.py`).
 It was first written from the code before the switch became its own module (commit 6607871, tag
-`options-before-switch-module`); since 2026-12-03 it is written from the two demos stored in
-`tests/data/pinned_pusht_demos.npz` instead of demos simulated at test time, because the Push-T simulator
-gives other demos on other CPUs (278 frames here, more on the machines that wrote the first pins), and
-the pins were rewritten from that day's code, which gave the first pins' actions on the first demos.
+`options-before-switch-module`). Since 2026-12-03 it is written from the two demos stored in
+`tests/data/pinned_pusht_demos/` (episode files as the generator caches them, without images) instead of
+demos simulated at test time, because the Push-T simulator gives other demos on other CPUs (278 frames
+here, more on the machines that wrote the first pins); the pins were rewritten from that day's code,
+which gave the first pins' actions on the first demos.
 The rollout: two rows, 40 steps, the T of row 0 starting in distribution and pushed out and back, the
 T of row 1 starting out of distribution and moving in, under the Push-T schedule (fixed delay 12, 16
 actions per chunk) and the Square-style schedule (distance ramp, 12 actions per chunk). Every piece is
@@ -22,7 +23,7 @@ import torch
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
 
 PINNED = Path(__file__).parent / "data" / "pinned_joint_actions.json"
-DEMOS = Path(__file__).parent / "data" / "pinned_pusht_demos.npz"
+DEMOS = Path(__file__).parent / "data" / "pinned_pusht_demos"
 SCHEDULES = {
     "pusht": {"fixed_delay": 12, "n_recovery_action_steps": 16},
     "ramp": {"n_recovery_action_steps": 12},
@@ -92,23 +93,17 @@ def pinned_actions(pusht_dataset: Path, converted_dataset: Path, work: Path) -> 
 
 
 def stored_demos(work: Path) -> tuple[Path, Path]:
-    """The stored demos (`DEMOS`: episode i's arrays under `<i>/<key>`, no images) as a LeRobotDataset
-    and its `lerobot-ocr convert` output under `work`: (dataset root, converted root)."""
+    """The stored demos (`DEMOS`: the generator's episode files, no images) as a LeRobotDataset and its
+    `lerobot-ocr convert` output under `work`: (dataset root, converted root)."""
     from lerobot_ocr.constants import PUSHT_TASK
     from lerobot_ocr.convert import convert_dataset
     from lerobot_ocr.datagen.pusht import pusht_features
     from lerobot_ocr.datagen.recording import build_dataset, episode_frames
 
-    with np.load(DEMOS) as z:
-        episodes = sorted({k.split("/")[0] for k in z.files}, key=int)
-        paths = []
-        for i in episodes:
-            paths.append(work / f"episode_{i}.npz")
-            np.savez(paths[-1], **{k.split("/")[1]: z[k] for k in z.files if k.startswith(f"{i}/")})
     features = {k: v for k, v in pusht_features(use_videos=False).items() if k != "observation.image"}
     root = work / "pusht"
     build_dataset(
-        paths, root, "local/pusht_ocr", 10, features, "2d pointer", False,
+        sorted(DEMOS.glob("episode_*.npz")), root, "local/pusht_ocr", 10, features, "2d pointer", False,
         lambda ep: episode_frames(ep, PUSHT_TASK, {}),
     )
     conv = work / "pusht_converted"
@@ -140,13 +135,11 @@ if __name__ == "__main__":  # regenerate the pinned file (only when a change of 
             from lerobot_ocr.datagen.pusht import generate_pusht
 
             generate_pusht(Path(tmp) / "sim", episodes=2, region="id", use_videos=False, keep_work=True)
-            files = sorted((Path(tmp) / "sim.work").glob("**/*.npz"))
-            arrays = {}
-            for i, f in enumerate(files):
+            DEMOS.mkdir(exist_ok=True)
+            for f in sorted((Path(tmp) / "sim.work").glob("**/episode_*.npz")):
                 with np.load(f) as ep:
-                    arrays.update({f"{i}/{k}": ep[k] for k in ep.files if k not in ("image", "seed")})
-            np.savez_compressed(DEMOS, **arrays)
-            print(f"wrote {DEMOS} ({len(files)} episodes)")
+                    np.savez_compressed(DEMOS / f.name, **{k: ep[k] for k in ep.files if k != "image"})
+            print(f"wrote {DEMOS}")
         PINNED.parent.mkdir(exist_ok=True)
         PINNED.write_text(json.dumps(pinned_actions(*stored_demos(Path(tmp)), Path(tmp))))
         print(f"wrote {PINNED}")

@@ -378,3 +378,33 @@ def test_the_joint_handback_density_is_fitted_at_training_and_saved(
     cfg.handback_components = 3
     with pytest.raises(ValueError, match="trained without the joint hand-back density"):
         get_policy_class("ocr_joint").from_pretrained(tmp_path / "plain", config=cfg)
+
+
+def test_a_stalled_recovery_chunk_shortens_the_next_plans_still_frames(diffusion_base, converted_dataset):
+    """--policy.stall_tolerance: a row whose last recovery chunk left the object where it was gets a plan
+    with at most stall_delay still frames; entering, or after a chunk that moved it, the usual delay."""
+    joint = make_joint(
+        diffusion_base,
+        converted_dataset,
+        fixed_delay=12,
+        n_recovery_action_steps=2,
+        stall_tolerance=3.0,
+        stall_delay=4,
+    )
+    plans = []
+
+    def sample(plan, state, frames, noise=None):
+        plans.append(plan.clone())
+        return torch.zeros(len(plan), joint.config.horizon, 2)
+
+    joint.inverse.sample = sample
+    joint.reset()
+    moved = [OOD_POSE[0] + 20.0, *OOD_POSE[1:]]
+    # row 0: the object stays put (stalls); row 1: it moves 20 px during its first chunk, then stays
+    for poses in ([OOD_POSE, OOD_POSE], [OOD_POSE, OOD_POSE], [OOD_POSE, moved], [OOD_POSE, moved]):
+        joint.select_action(observation(poses))
+    joint.select_action(observation([OOD_POSE, moved]))
+    still = [[int((p[b] == p[b, :1]).all(-1).all(-1).sum()) - 1 for b in range(len(p))] for p in plans]
+    # entering: 12 still frames each; then row 0 stalled (4) and row 1 moved (12); then both stalled
+    assert still == [[12, 12], [4, 12], [4, 4]]
+    assert joint.ocr_stats()["stalled_chunks"] == 3

@@ -75,3 +75,13 @@ def test_fixed_delay_ignores_the_distance():
     torch.testing.assert_close(traj[1, -1, 0], torch.tensor([0.0, 4.0]))
     with pytest.raises(ValueError, match="fixed_delay"):
         RecoveryPlanner(horizon=8, fixed_delay=8)
+
+
+def test_max_delay_caps_each_rows_still_frames():
+    planner = RecoveryPlanner(horizon=16, step_size=1.0, fixed_delay=12)
+    kps = torch.zeros(3, 2, 2)
+    vec = torch.tensor([[1.0, 0.0]] * 3)
+    plan = planner(kps, vec, torch.zeros(3), max_delay=torch.tensor([16, 4, 0]))
+    still = [(plan[b, :, 0, 0] == 0).sum().item() for b in range(3)]
+    assert still == [13, 5, 1]  # frame 0 plus the still frames: 12 (the cap is above it), 4, 0
+    torch.testing.assert_close(plan[:, -1, 0, 0], torch.tensor([3.0, 11.0, 15.0]))

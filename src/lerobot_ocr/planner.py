@@ -114,10 +114,17 @@ class RecoveryPlanner:
             raise ValueError(f"fixed_delay must be in [0, horizon={self.horizon}), got {self.fixed_delay}.")
 
     def __call__(
-        self, keypoints: torch.Tensor, recovery_vector: torch.Tensor, distance: torch.Tensor
+        self,
+        keypoints: torch.Tensor,
+        recovery_vector: torch.Tensor,
+        distance: torch.Tensor,
+        max_delay: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """(B, K, D) world keypoints, (B, D) or (B, K, D) recovery vectors, (B,) end-effector-to-object
-        distances -> (B, L, K, D) keypoint plan whose frame 0 is `keypoints`."""
+        distances -> (B, L, K, D) keypoint plan whose frame 0 is `keypoints`.
+
+        max_delay: (B,) optional cap on each row's still frames (e.g. fewer after a chunk that left the
+        object where it was)."""
         vec = recovery_vector
         if self.normalize:
             norm = torch.linalg.vector_norm(vec, dim=-1, keepdim=True)
@@ -128,4 +135,6 @@ class RecoveryPlanner:
             delay = torch.full(
                 (keypoints.shape[0],), self.fixed_delay, dtype=torch.long, device=keypoints.device
             )
+        if max_delay is not None:
+            delay = torch.minimum(delay, max_delay.to(delay))
         return plan_keypoint_trajectory(keypoints, vec, self.step_size, self.horizon, delay)

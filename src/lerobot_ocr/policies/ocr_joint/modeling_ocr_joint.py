@@ -369,6 +369,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         self.base.reset()
         self._switch: SwitchState | None = None
         self._chunk: torch.Tensor | None = None  # (B, n_recovery_action_steps, A) each row's recovery chunk
+        self._chunk_keypoints: torch.Tensor | None = None  # (B, K, D) world keypoints where it was planned
 
     def _archive_stats(self) -> None:
         if getattr(self, "_scores", None):
@@ -378,7 +379,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._decisions: list[
             torch.Tensor
         ] = []  # per step, (B,) bool: the row got a new chunk (base or recovery)
-        self._n_chunks = self._n_handbacks = 0
+        self._n_chunks = self._n_handbacks = self._n_stalls = 0
 
     def _start_rows(self, b: int, device: torch.device) -> None:
         """A first step, or a batch of another size or device (a new rollout): all rows start on the base."""
@@ -393,6 +394,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         action_dim = self.config.output_features[ACTION].shape[0]
         self._switch = SwitchState.start(b, device)
         self._chunk = torch.zeros(b, self.config.n_recovery_action_steps, action_dim, device=device)
+        self._chunk_keypoints = None
         self._unchecked = torch.full(
             (b,), float("nan"), dtype=torch.float64
         )  # the score where none was needed
@@ -446,24 +448,39 @@ class OcrJointPolicy(PreTrainedPolicy):
         state: torch.Tensor,
         recovery: RecoveryOutput | None = None,
         noise: torch.Tensor | None = None,
+        max_delay: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """One recovery chunk per row: world actions (R, L, A) and the keypoint plan (R, L, K, D).
 
         frames (R, D+1, D+1) object poses, keypoints (R, K, D), state (R, S), world frame;
         recovery: the manifold's verdict on these R rows (None: computed here); noise: the inverse
-        policy's initial noise (None: sampled).
+        policy's initial noise (None: sampled); max_delay: (R,) cap on the plan's still frames.
         """
         if recovery is None:
             recovery = self.manifold.recovery(keypoints.double(), magnitude=self.config.magnitude)
-        plan = self.planner(keypoints, recovery.vector.to(keypoints.dtype), self._distance(state, keypoints))
+        plan = self.planner(
+            keypoints, recovery.vector.to(keypoints.dtype), self._distance(state, keypoints), max_delay
+        )
         return self.inverse.sample(plan, state, frames, noise=noise), plan
 
     def _plan_chunks(self, obs: Observed, rows: torch.Tensor, noise: torch.Tensor | None) -> None:
         """Fill the chunk of the rows in the (B,) mask `rows` with the first n recovery actions."""
         idx = rows.nonzero().squeeze(-1)
         recovery = obs.recovery.rows(idx)
+        max_delay = None
+        cfg = self.config
+        if cfg.stall_tolerance is not None:
+            if self._chunk_keypoints is None:
+                self._chunk_keypoints = obs.keypoints.clone()
+            # a row that recovered through its last chunk (not one entering now) and barely moved the object
+            kept = self._switch.recovering[idx].to(idx.device)
+            moved = torch.linalg.vector_norm(obs.keypoints[idx] - self._chunk_keypoints[idx], dim=-1).mean(-1)
+            stalled = kept & (moved < cfg.stall_tolerance)
+            self._n_stalls += int(stalled.sum())
+            max_delay = torch.where(stalled, cfg.stall_delay, self.config.horizon).to(idx.device)
+            self._chunk_keypoints[idx] = obs.keypoints[idx]
         actions, _ = self.recovery_actions(
-            obs.frames[idx], obs.keypoints[idx], obs.state[idx], recovery, noise=noise
+            obs.frames[idx], obs.keypoints[idx], obs.state[idx], recovery, noise=noise, max_delay=max_delay
         )
         self._chunk[idx] = actions[:, : self._chunk.shape[1]].to(self._chunk)
 
@@ -587,6 +604,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             "mean_recovery_fraction": float(modes.mean()),
             "recovery_chunks": self._n_chunks,
             "handbacks": self._n_handbacks,
+            "stalled_chunks": self._n_stalls,
             "score": scores,
             "in_recovery": modes,
             "decisions": torch.stack(self._decisions).numpy() if self._decisions else None,

@@ -341,8 +341,8 @@ def test_the_joint_handback_density_is_fitted_at_training_and_saved(
     kp = policy._keypoints(policy._pose_matrix(inside["observation.object_pose"])).double()
     torch.testing.assert_close(seen.recovery.vector, density.translation_gradient(kp))
     planner, planned = policy.planner, []
-    policy.planner = lambda keypoints, vector, distance: planned.append(vector) or planner(
-        keypoints, vector, distance
+    policy.planner = lambda keypoints, vector, distance: (
+        planned.append(vector) or planner(keypoints, vector, distance)
     )
     policy.select_action(inside)
     policy.planner = planner
@@ -381,14 +381,14 @@ def test_the_joint_handback_density_is_fitted_at_training_and_saved(
 
 
 def test_a_stalled_recovery_chunk_shortens_the_next_plans_still_frames(diffusion_base, converted_dataset):
-    """--policy.stall_tolerance: a row whose last recovery chunk left the object where it was gets a plan
+    """--policy.stall_distance: a row whose last recovery chunk left the object where it was gets a plan
     with at most stall_delay still frames; entering, or after a chunk that moved it, the usual delay."""
     joint = make_joint(
         diffusion_base,
         converted_dataset,
         fixed_delay=12,
         n_recovery_action_steps=2,
-        stall_tolerance=3.0,
+        stall_distance=3.0,
         stall_delay=4,
     )
     plans = []

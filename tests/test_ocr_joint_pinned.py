@@ -103,7 +103,13 @@ def stored_demos(work: Path) -> tuple[Path, Path]:
     features = {k: v for k, v in pusht_features(use_videos=False).items() if k != "observation.image"}
     root = work / "pusht"
     build_dataset(
-        sorted(DEMOS.glob("episode_*.npz")), root, "local/pusht_ocr", 10, features, "2d pointer", False,
+        sorted(DEMOS.glob("episode_*.npz")),
+        root,
+        "local/pusht_ocr",
+        10,
+        features,
+        "2d pointer",
+        False,
         lambda ep: episode_frames(ep, PUSHT_TASK, {}),
     )
     conv = work / "pusht_converted"

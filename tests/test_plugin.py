@@ -89,10 +89,10 @@ def test_config_rejects_bad_recovery_settings():
         OcrJointConfig(device="cpu", n_recovery_action_steps=17)
     with pytest.raises(ValueError, match="Need d_max > d_min"):
         OcrJointConfig(device="cpu", d_min=5.0, d_max=5.0)
-    with pytest.raises(ValueError, match="stall_tolerance must be > 0"):
-        OcrJointConfig(device="cpu", stall_tolerance=0.0)
+    with pytest.raises(ValueError, match="stall_distance must be > 0"):
+        OcrJointConfig(device="cpu", stall_distance=0.0)
     with pytest.raises(ValueError, match="stall_delay must be in"):
-        OcrJointConfig(device="cpu", stall_tolerance=3.0, stall_delay=16)
+        OcrJointConfig(device="cpu", stall_distance=3.0, stall_delay=16)
 
 
 def test_upgrade_removes_retired_options_so_old_checkpoints_load(tmp_path):

@@ -74,8 +74,8 @@ class OcrJointConfig(PreTrainedConfig):
             reference's Push-T eval uses 12 of 16). Default None.
         n_recovery_action_steps: recovery actions executed per chunk before the row decides again.
             Default 8.
-        stall_tolerance, stall_delay: a recovery chunk after which the object's keypoints moved less
-            than stall_tolerance (object units, mean over keypoints) has stalled; the row's next chunk
+        stall_distance, stall_delay: a recovery chunk after which the object's keypoints moved less
+            than stall_distance (object units, mean over keypoints) has stalled; the row's next chunk
             holds the plan still for at most stall_delay frames, so the inverse policy pushes sooner.
             Default None (off). Beyond the paper.
     Inverse policy: LeRobot's diffusion U-Net (`down_dims`, ...), DDIM with `num_inference_steps`
@@ -115,7 +115,7 @@ class OcrJointConfig(PreTrainedConfig):
     d_max: float = 60.0
     fixed_delay: int | None = None
     n_recovery_action_steps: int = 8
-    stall_tolerance: float | None = None
+    stall_distance: float | None = None
     stall_delay: int = 8
 
     # Keypoint inverse policy (LeRobot's diffusion U-Net).
@@ -177,12 +177,14 @@ class OcrJointConfig(PreTrainedConfig):
             )
         if not self.d_max > self.d_min:
             raise ValueError(f"Need d_max > d_min, got d_min={self.d_min}, d_max={self.d_max}.")
-        if self.stall_tolerance is not None and not self.stall_tolerance > 0:
+        if self.stall_distance is not None and not self.stall_distance > 0:
             raise ValueError(
-                f"--policy.stall_tolerance must be > 0 (object units) or None, got {self.stall_tolerance}."
+                f"--policy.stall_distance must be > 0 (object units) or None, got {self.stall_distance}."
             )
         if not 0 <= self.stall_delay < self.horizon:
-            raise ValueError(f"--policy.stall_delay must be in [0, horizon={self.horizon}), got {self.stall_delay}.")
+            raise ValueError(
+                f"--policy.stall_delay must be in [0, horizon={self.horizon}), got {self.stall_delay}."
+            )
         if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:
             raise ValueError(
                 f"--policy.fixed_delay must be in [0, horizon={self.horizon}) or None, got "

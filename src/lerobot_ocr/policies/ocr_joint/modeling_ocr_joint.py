@@ -458,9 +458,8 @@ class OcrJointPolicy(PreTrainedPolicy):
         """
         if recovery is None:
             recovery = self.manifold.recovery(keypoints.double(), magnitude=self.config.magnitude)
-        plan = self.planner(
-            keypoints, recovery.vector.to(keypoints.dtype), self._distance(state, keypoints), max_delay
-        )
+        args = (keypoints, recovery.vector.to(keypoints.dtype), self._distance(state, keypoints))
+        plan = self.planner(*args) if max_delay is None else self.planner(*args, max_delay=max_delay)
         return self.inverse.sample(plan, state, frames, noise=noise), plan
 
     def _plan_chunks(self, obs: Observed, rows: torch.Tensor, noise: torch.Tensor | None) -> None:
@@ -469,15 +468,15 @@ class OcrJointPolicy(PreTrainedPolicy):
         recovery = obs.recovery.rows(idx)
         max_delay = None
         cfg = self.config
-        if cfg.stall_tolerance is not None:
+        if cfg.stall_distance is not None:
             if self._chunk_keypoints is None:
                 self._chunk_keypoints = obs.keypoints.clone()
             # a row that recovered through its last chunk (not one entering now) and barely moved the object
             kept = self._switch.recovering[idx].to(idx.device)
             moved = torch.linalg.vector_norm(obs.keypoints[idx] - self._chunk_keypoints[idx], dim=-1).mean(-1)
-            stalled = kept & (moved < cfg.stall_tolerance)
+            stalled = kept & (moved < cfg.stall_distance)
             self._n_stalls += int(stalled.sum())
-            max_delay = torch.where(stalled, cfg.stall_delay, self.config.horizon).to(idx.device)
+            max_delay = torch.where(stalled, cfg.stall_delay, cfg.horizon).to(idx.device)
             self._chunk_keypoints[idx] = obs.keypoints[idx]
         actions, _ = self.recovery_actions(
             obs.frames[idx], obs.keypoints[idx], obs.state[idx], recovery, noise=noise, max_delay=max_delay

@@ -8,8 +8,10 @@ episode with its recorded actions (checking that the replay succeeds at the reco
 T's pose where it matters: at the first hand-back (NaN for episodes that start on the base or never hand
 back) and at the end. Per episode it reports the T's distance
 to the goal (px, centre), its angle error (degrees), the keypoint error to the goal pose (px, the
-expert's `pose_error`), how far the T moved over the last 100 steps (a stall), and how many times the
-switch entered recovery; then it compares the successes and failures within the reference's budget.
+expert's `pose_error`), how far the T moved over the last 100 steps (a stall), how many times the
+switch entered recovery, and how many of its recovery chunks left the T where it was (its 9 keypoints
+moved less than `STALL_PX` on average: the pusher hovered); then it compares the successes and failures
+within the reference's budget.
 No network runs; seconds on a CPU. Prints a summary and writes `--out` (JSON) if given.
 """
 
@@ -33,6 +35,27 @@ def angle_error(theta: np.ndarray) -> np.ndarray:
     """|theta - goal theta| wrapped to [0, 180] degrees."""
     d = (np.asarray(theta) - PUSHT_GOAL_POSE[2] + np.pi) % (2 * np.pi) - np.pi
     return np.degrees(np.abs(d))
+
+
+STALL_PX = 3.0  # a recovery chunk that moved the T's keypoints less than this (mean) stalled
+
+
+def stalled_chunks(pose: np.ndarray, decisions: np.ndarray, recovering: np.ndarray) -> tuple[int, int]:
+    """(recovery chunks, stalled ones) of one episode: pose (n+1, 3) the T's (x, y, theta) before each
+    step and after the last; decisions, recovering (n,) bool per step (`stats.decisions`,
+    `stats.in_recovery`). A chunk runs from its decision to the next decision (or the episode's end)."""
+    from lerobot_ocr.keypoints import PUSHT_T_KEYPOINTS, pose_to_keypoints
+
+    n = len(decisions)
+    starts = np.nonzero(decisions & recovering)[0]
+    nexts = np.nonzero(decisions)[0]
+    kp = pose_to_keypoints(np.asarray(pose, dtype=np.float64), PUSHT_T_KEYPOINTS, rotation="angle")
+    stalled = 0
+    for s in starts:
+        later = nexts[nexts > s]
+        e = int(later[0]) if len(later) else n
+        stalled += int(np.linalg.norm(kp[e] - kp[s], axis=-1).mean() < STALL_PX)
+    return len(starts), stalled
 
 
 def replay(seed: int, actions: np.ndarray, steps: int, episode_length: int, region: str = "ood") -> dict:
@@ -79,6 +102,7 @@ def episodes(cell: Path, episode_length: int, decision_budget: int, region: str 
             rep = replay(seed, actions[b], n, episode_length, region)
             replayed = np.nonzero(rep["reward"] >= 1.0 - 1e-9)[0]
             rec = modes[:n, b].astype(bool)
+            n_chunks, n_stalled = stalled_chunks(rep["pose"], decisions[:n, b].astype(bool), rec)
             # -1: never on the base; 0: started on the base (no hand-back)
             first_base = int(np.argmin(rec)) if rec[0] and not rec.all() else (0 if not rec[0] else -1)
             pose = rep["pose"]
@@ -96,6 +120,8 @@ def episodes(cell: Path, episode_length: int, decision_budget: int, region: str 
                     "solved_episode": bool(succ[b] > 0),
                     "first_base_step": first_base,
                     "entries": int(rec[0]) + int((~rec[:-1] & rec[1:]).sum()),
+                    "recovery_chunks": n_chunks,
+                    "stalled_chunks": n_stalled,
                     "recovery_fraction": float(rec.mean()),
                     "handback_goal_distance": float(np.linalg.norm(at[:2] - PUSHT_GOAL_POSE[:2])),
                     "handback_angle_error": float(angle_error(at[2])),
@@ -135,7 +161,7 @@ def main() -> None:
     mismatched = [r["seed"] for r in rows if r["success_step"] != r["replay_success_step"]]
     keys = ("first_base_step", "handback_goal_distance", "handback_angle_error", "handback_pose_error",
             "end_goal_distance", "end_angle_error", "end_pose_error", "tail_motion", "entries",
-            "recovery_fraction", "max_reward")  # fmt: skip
+            "recovery_chunks", "stalled_chunks", "recovery_fraction", "max_reward")  # fmt: skip
     groups = {}
     for start in (True, False):
         for solved in (True, False):

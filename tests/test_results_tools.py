@@ -252,3 +252,21 @@ def test_the_pusht_failure_replay_reproduces_a_recorded_episode(tmp_path):
     assert (r1["success_step"], r1["replay_success_step"], r1["started_ood"]) == (-1, -1, False)
     assert r1["tail_motion"] < 1e-6 and r1["steps"] == t
     assert r1["first_base_step"] == 0 and np.isnan(r1["handback_goal_distance"])  # no hand-back to read
+
+
+def test_pusht_failures_counts_the_recovery_chunks_that_left_the_t_where_it_was():
+    import numpy as np
+    import pusht_failures
+
+    n = 24  # three 8-step chunks: recovery (T still), recovery (T turns 10 degrees), base (T still)
+    pose = np.tile([200.0, 300.0, 0.5], (n + 1, 1))
+    pose[9:17, 2] = 0.5 + np.linspace(0, np.radians(10), 8)
+    pose[17:, 2] = 0.5 + np.radians(10)
+    decisions = np.zeros(n, bool)
+    decisions[::8] = True
+    recovering = np.arange(n) < 16
+    assert pusht_failures.stalled_chunks(pose, decisions, recovering) == (2, 1)
+    recovering[:] = True  # the third chunk recovers too, and the T stays put in it: a second stall
+    assert pusht_failures.stalled_chunks(pose, decisions, recovering) == (3, 2)
+    pose[1:, 0] += 2.9 * np.arange(1, n + 1) / n  # a slow drift: under 3 px per chunk still stalls
+    assert pusht_failures.stalled_chunks(pose, decisions, recovering) == (3, 2)

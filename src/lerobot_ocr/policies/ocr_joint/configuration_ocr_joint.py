@@ -77,7 +77,8 @@ class OcrJointConfig(PreTrainedConfig):
         stall_distance, stall_delay: a recovery chunk after which the object's keypoints moved less
             than stall_distance (object units, mean over keypoints) has stalled; the row's next chunk
             holds the plan still for at most stall_delay frames, so the inverse policy pushes sooner.
-            Default None (off). Beyond the paper.
+            Default None (off); `predict_action_chunk`, which has no memory, never applies it. Beyond
+            the paper (benchmarks/EXPERIMENTS.md, "A plan that pushes sooner after a stalled chunk").
     Inverse policy: LeRobot's diffusion U-Net (`down_dims`, ...), DDIM with `num_inference_steps`
         steps by default; `max_normalization_windows` training windows fit its normalisation.
     """

@@ -341,8 +341,8 @@ def test_the_joint_handback_density_is_fitted_at_training_and_saved(
     kp = policy._keypoints(policy._pose_matrix(inside["observation.object_pose"])).double()
     torch.testing.assert_close(seen.recovery.vector, density.translation_gradient(kp))
     planner, planned = policy.planner, []
-    policy.planner = lambda keypoints, vector, distance: (
-        planned.append(vector) or planner(keypoints, vector, distance)
+    policy.planner = lambda keypoints, vector, distance, max_delay=None: (
+        planned.append(vector) or planner(keypoints, vector, distance, max_delay)
     )
     policy.select_action(inside)
     policy.planner = planner
@@ -383,11 +383,12 @@ def test_the_joint_handback_density_is_fitted_at_training_and_saved(
 def test_a_stalled_recovery_chunk_shortens_the_next_plans_still_frames(diffusion_base, converted_dataset):
     """--policy.stall_distance: a row whose last recovery chunk left the object where it was gets a plan
     with at most stall_delay still frames; entering, or after a chunk that moved it, the usual delay."""
+    n = 16  # the Push-T schedule: 12 still frames, the 16 actions all run (the last 3 push)
     joint = make_joint(
         diffusion_base,
         converted_dataset,
         fixed_delay=12,
-        n_recovery_action_steps=2,
+        n_recovery_action_steps=n,
         stall_distance=3.0,
         stall_delay=4,
     )
@@ -401,10 +402,31 @@ def test_a_stalled_recovery_chunk_shortens_the_next_plans_still_frames(diffusion
     joint.reset()
     moved = [OOD_POSE[0] + 20.0, *OOD_POSE[1:]]
     # row 0: the object stays put (stalls); row 1: it moves 20 px during its first chunk, then stays
-    for poses in ([OOD_POSE, OOD_POSE], [OOD_POSE, OOD_POSE], [OOD_POSE, moved], [OOD_POSE, moved]):
-        joint.select_action(observation(poses))
-    joint.select_action(observation([OOD_POSE, moved]))
+    for t in range(2 * n + 1):
+        joint.select_action(observation([OOD_POSE, OOD_POSE if t < n else moved]))
     still = [[int((p[b] == p[b, :1]).all(-1).all(-1).sum()) - 1 for b in range(len(p))] for p in plans]
     # entering: 12 still frames each; then row 0 stalled (4) and row 1 moved (12); then both stalled
     assert still == [[12, 12], [4, 12], [4, 4]]
-    assert joint.ocr_stats()["stalled_chunks"] == 3
+    assert joint.ocr_stats()["shortened_plans"] == 3
+
+
+def test_a_plan_that_held_still_is_no_stall(diffusion_base, converted_dataset):
+    """With the distance ramp a far robot gets a plan that holds still through its executed actions:
+    the object not moving then is what was asked, so the next plan keeps the ramp's delay."""
+    joint = make_joint(
+        diffusion_base, converted_dataset, n_recovery_action_steps=2, stall_distance=3.0, stall_delay=4
+    )
+    plans = []
+
+    def sample(plan, state, frames, noise=None):
+        plans.append(plan.clone())
+        return torch.zeros(len(plan), joint.config.horizon, 2)
+
+    joint.inverse.sample = sample
+    joint.reset()
+    far = [[OOD_POSE[0] - 200.0, OOD_POSE[1] + 300.0]]  # beyond d_max (60 px): the ramp holds L frames
+    for _ in range(5):
+        joint.select_action(observation([OOD_POSE], far))
+    still = [int((p[0] == p[0, :1]).all(-1).all(-1).sum()) - 1 for p in plans]
+    assert still == [15, 15, 15]  # all 16 frames still: no motion asked, none counted as a stall
+    assert joint.ocr_stats()["shortened_plans"] == 0

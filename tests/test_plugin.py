@@ -93,6 +93,11 @@ def test_config_rejects_bad_recovery_settings():
         OcrJointConfig(device="cpu", stall_distance=0.0)
     with pytest.raises(ValueError, match="stall_delay must be in"):
         OcrJointConfig(device="cpu", stall_distance=3.0, stall_delay=16)
+    # off, the cap is not checked: a short horizon stays valid with the default stall_delay
+    assert (
+        OcrJointConfig(device="cpu", horizon=4, down_dims=(32, 64), n_recovery_action_steps=4).stall_delay
+        == 4
+    )
 
 
 def test_upgrade_removes_retired_options_so_old_checkpoints_load(tmp_path):

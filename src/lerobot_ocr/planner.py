@@ -123,8 +123,8 @@ class RecoveryPlanner:
         """(B, K, D) world keypoints, (B, D) or (B, K, D) recovery vectors, (B,) end-effector-to-object
         distances -> (B, L, K, D) keypoint plan whose frame 0 is `keypoints`.
 
-        max_delay: (B,) optional cap on each row's still frames (e.g. fewer after a chunk that left the
-        object where it was)."""
+        max_delay: (B,) optional integer cap on each row's still frames (e.g. fewer after a chunk that
+        left the object where it was); a cap >= horizon changes nothing."""
         vec = recovery_vector
         if self.normalize:
             norm = torch.linalg.vector_norm(vec, dim=-1, keepdim=True)

@@ -74,11 +74,13 @@ class OcrJointConfig(PreTrainedConfig):
             reference's Push-T eval uses 12 of 16). Default None.
         n_recovery_action_steps: recovery actions executed per chunk before the row decides again.
             Default 8.
-        stall_distance, stall_delay: a recovery chunk after which the object's keypoints moved less
-            than stall_distance (object units, mean over keypoints) has stalled; the row's next chunk
-            holds the plan still for at most stall_delay frames, so the inverse policy pushes sooner.
-            Default None (off); `predict_action_chunk`, which has no memory, never applies it. Beyond
-            the paper (benchmarks/EXPERIMENTS.md, "A plan that pushes sooner after a stalled chunk").
+        stall_distance, stall_delay: a recovery chunk whose plan moved the object within its executed
+            actions, but after which the object's keypoints moved less than stall_distance (object
+            units, mean over keypoints), has stalled; the row's next plan holds still for at most
+            stall_delay frames, so the inverse policy pushes sooner. A plan that held still through its
+            executed actions (the distance ramp while the robot is far) is no stall. Defaults None
+            (off), 4; `predict_action_chunk`, which has no memory, never applies it. Beyond the paper
+            (benchmarks/EXPERIMENTS.md, "A plan that pushes sooner after a stalled chunk").
     Inverse policy: LeRobot's diffusion U-Net (`down_dims`, ...), DDIM with `num_inference_steps`
         steps by default; `max_normalization_windows` training windows fit its normalisation.
     """
@@ -117,7 +119,7 @@ class OcrJointConfig(PreTrainedConfig):
     fixed_delay: int | None = None
     n_recovery_action_steps: int = 8
     stall_distance: float | None = None
-    stall_delay: int = 8
+    stall_delay: int = 4
 
     # Keypoint inverse policy (LeRobot's diffusion U-Net).
     down_dims: tuple[int, ...] = (256, 512, 1024)
@@ -182,7 +184,7 @@ class OcrJointConfig(PreTrainedConfig):
             raise ValueError(
                 f"--policy.stall_distance must be > 0 (object units) or None, got {self.stall_distance}."
             )
-        if not 0 <= self.stall_delay < self.horizon:
+        if self.stall_distance is not None and not 0 <= self.stall_delay < self.horizon:
             raise ValueError(
                 f"--policy.stall_delay must be in [0, horizon={self.horizon}), got {self.stall_delay}."
             )

@@ -369,7 +369,10 @@ class OcrJointPolicy(PreTrainedPolicy):
         self.base.reset()
         self._switch: SwitchState | None = None
         self._chunk: torch.Tensor | None = None  # (B, n_recovery_action_steps, A) each row's recovery chunk
-        self._chunk_keypoints: torch.Tensor | None = None  # (B, K, D) world keypoints where it was planned
+        # per row: (B, K, D) world keypoints where its last recovery chunk was planned, and (B,) whether
+        # that plan moved them within the executed actions (`stall_distance`)
+        self._chunk_keypoints: torch.Tensor | None = None
+        self._chunk_pushes: torch.Tensor | None = None
 
     def _archive_stats(self) -> None:
         if getattr(self, "_scores", None):
@@ -379,7 +382,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._decisions: list[
             torch.Tensor
         ] = []  # per step, (B,) bool: the row got a new chunk (base or recovery)
-        self._n_chunks = self._n_handbacks = self._n_stalls = 0
+        self._n_chunks = self._n_handbacks = self._n_shortened = 0
 
     def _start_rows(self, b: int, device: torch.device) -> None:
         """A first step, or a batch of another size or device (a new rollout): all rows start on the base."""
@@ -394,7 +397,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         action_dim = self.config.output_features[ACTION].shape[0]
         self._switch = SwitchState.start(b, device)
         self._chunk = torch.zeros(b, self.config.n_recovery_action_steps, action_dim, device=device)
-        self._chunk_keypoints = None
+        self._chunk_keypoints = self._chunk_pushes = None
         self._unchecked = torch.full(
             (b,), float("nan"), dtype=torch.float64
         )  # the score where none was needed
@@ -458,30 +461,39 @@ class OcrJointPolicy(PreTrainedPolicy):
         """
         if recovery is None:
             recovery = self.manifold.recovery(keypoints.double(), magnitude=self.config.magnitude)
-        args = (keypoints, recovery.vector.to(keypoints.dtype), self._distance(state, keypoints))
-        plan = self.planner(*args) if max_delay is None else self.planner(*args, max_delay=max_delay)
+        distance = self._distance(state, keypoints)
+        plan = self.planner(keypoints, recovery.vector.to(keypoints.dtype), distance, max_delay=max_delay)
         return self.inverse.sample(plan, state, frames, noise=noise), plan
 
     def _plan_chunks(self, obs: Observed, rows: torch.Tensor, noise: torch.Tensor | None) -> None:
-        """Fill the chunk of the rows in the (B,) mask `rows` with the first n recovery actions."""
+        """Fill the chunk of the rows in the (B,) mask `rows` with the first n recovery actions.
+
+        With `stall_distance`, a row that was recovering already and whose last plan pushed (moved the
+        keypoints within the executed actions) but left the object where it was gets at most
+        `stall_delay` still frames; the rows' planned keypoints and pushes are remembered for the next
+        check, and `ocr_stats()["shortened_plans"]` counts the capped plans.
+        """
+        cfg = self.config
         idx = rows.nonzero().squeeze(-1)
         recovery = obs.recovery.rows(idx)
         max_delay = None
-        cfg = self.config
         if cfg.stall_distance is not None:
             if self._chunk_keypoints is None:
                 self._chunk_keypoints = obs.keypoints.clone()
-            # a row that recovered through its last chunk (not one entering now) and barely moved the object
-            kept = self._switch.recovering[idx].to(idx.device)
+                self._chunk_pushes = torch.zeros(len(obs.keypoints), dtype=torch.bool, device=idx.device)
             moved = torch.linalg.vector_norm(obs.keypoints[idx] - self._chunk_keypoints[idx], dim=-1).mean(-1)
-            stalled = kept & (moved < cfg.stall_distance)
-            self._n_stalls += int(stalled.sum())
-            max_delay = torch.where(stalled, cfg.stall_delay, cfg.horizon).to(idx.device)
-            self._chunk_keypoints[idx] = obs.keypoints[idx]
-        actions, _ = self.recovery_actions(
+            # recovering at the last step (not entering now) and its last plan pushed
+            stalled = self._switch.recovering[idx] & self._chunk_pushes[idx] & (moved < cfg.stall_distance)
+            self._n_shortened += int(stalled.sum())
+            max_delay = torch.where(stalled, cfg.stall_delay, cfg.horizon)
+        actions, plan = self.recovery_actions(
             obs.frames[idx], obs.keypoints[idx], obs.state[idx], recovery, noise=noise, max_delay=max_delay
         )
-        self._chunk[idx] = actions[:, : self._chunk.shape[1]].to(self._chunk)
+        n = self._chunk.shape[1]
+        self._chunk[idx] = actions[:, :n].to(self._chunk)
+        if cfg.stall_distance is not None:
+            self._chunk_keypoints[idx] = obs.keypoints[idx]
+            self._chunk_pushes[idx] = (plan[:, n - 1] != plan[:, 0]).flatten(1).any(-1).to(idx.device)
 
     def _decide(self, obs: Observed | None, noise: torch.Tensor | None, device) -> torch.Tensor:
         """Switch the rows, plan the chunks they need, hand back; return the (B,) scores (NaN: unchecked)."""
@@ -603,7 +615,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             "mean_recovery_fraction": float(modes.mean()),
             "recovery_chunks": self._n_chunks,
             "handbacks": self._n_handbacks,
-            "stalled_chunks": self._n_stalls,
+            "shortened_plans": self._n_shortened,  # recovery plans capped at stall_delay after a stall
             "score": scores,
             "in_recovery": modes,
             "decisions": torch.stack(self._decisions).numpy() if self._decisions else None,

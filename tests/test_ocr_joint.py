@@ -380,6 +380,22 @@ def test_the_joint_handback_density_is_fitted_at_training_and_saved(
         get_policy_class("ocr_joint").from_pretrained(tmp_path / "plain", config=cfg)
 
 
+def still_frames_of_plans(joint, steps):
+    """Run `steps` = [(poses, states or None), ...] through `joint` with its inverse policy replaced by a
+    recorder; return per recovery plan, per row, how many frames after frame 0 hold the keypoints still."""
+    plans = []
+
+    def sample(plan, state, frames, noise=None):
+        plans.append(plan.clone())
+        return torch.zeros(len(plan), joint.config.horizon, 2)
+
+    joint.inverse.sample = sample
+    joint.reset()
+    for poses, states in steps:
+        joint.select_action(observation(poses, states))
+    return [[int((p[b] == p[b, :1]).all(-1).all(-1).sum()) - 1 for b in range(len(p))] for p in plans]
+
+
 def test_a_stalled_recovery_chunk_shortens_the_next_plans_still_frames(diffusion_base, converted_dataset):
     """--policy.stall_distance: a row whose last recovery chunk left the object where it was gets a plan
     with at most stall_delay still frames; entering, or after a chunk that moved it, the usual delay."""
@@ -392,21 +408,11 @@ def test_a_stalled_recovery_chunk_shortens_the_next_plans_still_frames(diffusion
         stall_distance=3.0,
         stall_delay=4,
     )
-    plans = []
-
-    def sample(plan, state, frames, noise=None):
-        plans.append(plan.clone())
-        return torch.zeros(len(plan), joint.config.horizon, 2)
-
-    joint.inverse.sample = sample
-    joint.reset()
     moved = [OOD_POSE[0] + 20.0, *OOD_POSE[1:]]
     # row 0: the object stays put (stalls); row 1: it moves 20 px during its first chunk, then stays
-    for t in range(2 * n + 1):
-        joint.select_action(observation([OOD_POSE, OOD_POSE if t < n else moved]))
-    still = [[int((p[b] == p[b, :1]).all(-1).all(-1).sum()) - 1 for b in range(len(p))] for p in plans]
+    steps = [([OOD_POSE, OOD_POSE if t < n else moved], None) for t in range(2 * n + 1)]
     # entering: 12 still frames each; then row 0 stalled (4) and row 1 moved (12); then both stalled
-    assert still == [[12, 12], [4, 12], [4, 4]]
+    assert still_frames_of_plans(joint, steps) == [[12, 12], [4, 12], [4, 4]]
     assert joint.ocr_stats()["shortened_plans"] == 3
 
 
@@ -416,17 +422,7 @@ def test_a_plan_that_held_still_is_no_stall(diffusion_base, converted_dataset):
     joint = make_joint(
         diffusion_base, converted_dataset, n_recovery_action_steps=2, stall_distance=3.0, stall_delay=4
     )
-    plans = []
-
-    def sample(plan, state, frames, noise=None):
-        plans.append(plan.clone())
-        return torch.zeros(len(plan), joint.config.horizon, 2)
-
-    joint.inverse.sample = sample
-    joint.reset()
     far = [[OOD_POSE[0] - 200.0, OOD_POSE[1] + 300.0]]  # beyond d_max (60 px): the ramp holds L frames
-    for _ in range(5):
-        joint.select_action(observation([OOD_POSE], far))
-    still = [int((p[0] == p[0, :1]).all(-1).all(-1).sum()) - 1 for p in plans]
-    assert still == [15, 15, 15]  # all 16 frames still: no motion asked, none counted as a stall
+    # all 16 frames still: no motion asked, none counted as a stall
+    assert still_frames_of_plans(joint, [([OOD_POSE], far)] * 5) == [[15], [15], [15]]
     assert joint.ocr_stats()["shortened_plans"] == 0

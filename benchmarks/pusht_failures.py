@@ -37,7 +37,8 @@ def angle_error(theta: np.ndarray) -> np.ndarray:
     return np.degrees(np.abs(d))
 
 
-STALL_PX = 3.0  # a recovery chunk that moved the T's keypoints less than this (mean) stalled
+STALL_PX = 3.0  # a recovery chunk that moved the T's keypoints less than this (mean) stalled: the
+# shipped `ocr_joint_pusht.json`'s `stall_distance`, kept here so cells recorded without it read the same
 
 
 def stalled_chunks(pose: np.ndarray, decisions: np.ndarray, recovering: np.ndarray) -> tuple[int, int]:
@@ -46,16 +47,12 @@ def stalled_chunks(pose: np.ndarray, decisions: np.ndarray, recovering: np.ndarr
     `stats.in_recovery`). A chunk runs from its decision to the next decision (or the episode's end)."""
     from lerobot_ocr.keypoints import PUSHT_T_KEYPOINTS, pose_to_keypoints
 
-    n = len(decisions)
     starts = np.nonzero(decisions & recovering)[0]
-    nexts = np.nonzero(decisions)[0]
+    bounds = np.append(np.nonzero(decisions)[0], len(decisions))
+    ends = bounds[np.searchsorted(bounds, starts, side="right")]  # the next decision, or the episode's end
     kp = pose_to_keypoints(np.asarray(pose, dtype=np.float64), PUSHT_T_KEYPOINTS, rotation="angle")
-    stalled = 0
-    for s in starts:
-        later = nexts[nexts > s]
-        e = int(later[0]) if len(later) else n
-        stalled += int(np.linalg.norm(kp[e] - kp[s], axis=-1).mean() < STALL_PX)
-    return len(starts), stalled
+    moved = np.linalg.norm(kp[ends] - kp[starts], axis=-1).mean(-1)
+    return len(starts), int((moved < STALL_PX).sum())
 
 
 def replay(seed: int, actions: np.ndarray, steps: int, episode_length: int, region: str = "ood") -> dict:

@@ -3,6 +3,8 @@
 import sys
 from pathlib import Path
 
+import pytest
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import probe  # noqa: E402
 import summary  # noqa: E402
@@ -270,3 +272,81 @@ def test_pusht_failures_counts_the_recovery_chunks_that_left_the_t_where_it_was(
     assert pusht_failures.stalled_chunks(pose, decisions, recovering) == (3, 2)
     pose[1:, 0] += 2.9 * np.arange(1, n + 1) / n  # a slow drift: under 3 px per chunk still stalls
     assert pusht_failures.stalled_chunks(pose, decisions, recovering) == (3, 2)
+
+
+def test_the_square_failure_replay_reproduces_and_reads_a_recorded_episode(tmp_path):
+    """Square's replay (`benchmarks/square_failures.py`): the scripted expert's successful OOD episode
+    and a robot that holds still are re-simulated from their seeds and actions; the success step matches,
+    each episode's ending is read from the switch's modes, and the nut of the still row stays put."""
+    pytest.importorskip("robosuite")
+    import numpy as np
+    import square_failures
+    import torch
+
+    from lerobot_ocr.envs.square_env import make_square_ocr_env, pose_to_action
+    from lerobot_ocr.eval_resume import BatchRecords
+    from lerobot_ocr.experts.square_expert import run_square_expert_episode
+
+    env = make_square_ocr_env(region="ood", render_mode=None)
+    seeds = [100000, 100001]
+    episode = run_square_expert_episode(env, seed=seeds[0])
+    assert episode["success"]
+    n = episode["length"]
+    t = n + 30
+    action = np.zeros((2, t, 10), np.float32)
+    action[0, :n] = [s["action"] for s in episode["steps"]]
+    action[0, n:] = action[0, n - 1]
+    env.reset(seed=seeds[1])
+    eef, rot = env.unwrapped.eef_pose()
+    action[1] = pose_to_action(eef, rot, -1.0)  # holds its start pose, gripper open: the nut never moves
+    env.close()
+    success = np.zeros((2, t), bool)
+    success[0, n - 1 :] = True
+    done = success.copy()
+    done[1, -1] = True
+    in_recovery = np.zeros((t, 2), bool)
+    in_recovery[:60, 0] = True  # row 0 recovers 60 steps, then the base
+    in_recovery[:, 1] = True  # row 1 never hands back
+    score = np.full((t, 2), np.nan)
+    score[::8] = -20.0
+    decisions = np.zeros((t, 2), bool)
+    decisions[::8] = True
+    records = BatchRecords(tmp_path, "key", resume=False)
+    rollout = {k: torch.as_tensor(v) for k, v in (("action", action), ("success", success), ("done", done))}
+    stats = {"steps": t, "in_recovery": in_recovery, "decisions": decisions, "score": score}
+    records.save(0, rollout, stats, 8, seeds, 1.0)
+    rows = square_failures.episodes(tmp_path)
+    assert [r["seed"] for r in rows] == seeds
+    r0, r1 = rows
+    assert r0["success_step"] == r0["replay_success_step"] == n and r0["ending"] == "solved"
+    assert (r0["first_base_step"], r0["entries"]) == (60, 1)
+    closes = int(((action[0, 1:60, -1] > 0) & (action[0, :59, -1] <= 0)).sum())
+    assert r0["grasps_in_recovery"] == closes
+    assert r0["nut_peg_cm"] < 3.0  # solved: the nut sits around the peg
+    assert (r1["ending"], r1["replay_success_step"], r1["grasps_in_recovery"]) == ("never handed back", -1, 0)
+    assert r1["nut_moved_cm"] < 0.5 and abs(r1["nut_lift_cm"]) < 0.5 and r1["nut_tilt_deg"] < 5.0
+    assert r1["last_score"] == -20.0 and r1["steps"] == t
+    only = square_failures.episodes(tmp_path, failures_only=True)  # the solved row is not replayed
+    assert "nut_lift_cm" not in only[0] and only[1]["nut_moved_cm"] == r1["nut_moved_cm"]
+
+
+def test_square_failure_endings_grasps_and_tilt():
+    import numpy as np
+    import square_failures
+
+    rec = np.array([1, 1, 0, 0, 1, 1], bool)
+    assert square_failures.ending(rec, solved=True) == "solved"
+    assert square_failures.ending(rec, solved=False) == "ended in a later recovery"
+    assert square_failures.ending(rec[:4], solved=False) == "ended on the base"
+    assert square_failures.ending(np.ones(4, bool), solved=False) == "never handed back"
+    gripper = np.array([-1, 1, 1, -1, 1, -1, 1, 1], float)
+    # closes at steps 1, 4 and 6; only those while recovering count
+    assert square_failures.grasps(gripper, np.ones(8, bool)) == 3
+    assert square_failures.grasps(gripper, np.array([0, 0, 0, 0, 1, 1, 1, 1], bool)) == 2
+    assert square_failures.tilt_degrees(np.array([1.0, 0, 0, 0])) == pytest.approx(0.0)
+    half = np.radians(90) / 2  # 90 degrees about x: the nut on its side
+    assert square_failures.tilt_degrees(np.array([np.cos(half), np.sin(half), 0, 0])) == pytest.approx(90.0)
+    yaw = np.radians(70) / 2  # a turn about the vertical does not tilt it
+    assert square_failures.tilt_degrees(np.array([np.cos(yaw), 0, 0, np.sin(yaw)])) == pytest.approx(
+        0.0, abs=1e-6
+    )

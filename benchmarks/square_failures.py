@@ -1,0 +1,200 @@
+"""Square: where a joint eval cell's episodes end up, replayed from its recorded batches.
+
+    MUJOCO_GL=egl .venv/bin/python benchmarks/square_failures.py --cell outputs/square_ocr_cpu/eval_joint_ood
+
+`lerobot-ocr eval` keeps each batch's actions, success flags, the switch's modes and the manifold's score
+(`batches/`), not the nut's poses. A seeded Square episode is deterministic given its actions (robosuite's
+reset draws from the seeded env), so this re-simulates each episode with its recorded actions (checking
+that the replay succeeds at the recorded step; `--failures-only` replays only the episodes that did not
+succeed) and reads the nut where it ends: its lift above the table (cm, from its resting height), its
+tilt (degrees between the nut's axis and the vertical: a nut lying on the table is ~0, tipped over ~90), its
+horizontal distance to the square peg (cm), whether it lies in the ID start box, and the end effector's
+distance to the nut's handle. From the records: how the episode ended (solved; never handed back; handed
+back, then ended in a later recovery; ended on the base), the recovery entries, how often the gripper
+closed while recovering (grasps and re-grasps), and the manifold's last recorded score.
+No network runs. Prints a table per ending and one line per failure; writes `--out` (JSON) if given.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path[:0] = [str(HERE.parent / "src")]
+
+from lerobot_ocr.eval_report import episode_steps, success_steps  # noqa: E402
+
+GRIPPER = -1  # the action's gripper command: -1 open, +1 closed (`square_env`)
+SETTLE = 30  # steps after a reset by which the nut has dropped onto the table (by 10), before a grasp
+
+
+def ending(recovering: np.ndarray, solved: bool) -> str:
+    """How an episode of (n,) per-step recovery modes ended: "solved", "never handed back", "ended in a
+    later recovery" or "ended on the base"."""
+    if solved:
+        return "solved"
+    if recovering.all():
+        return "never handed back"
+    return "ended in a later recovery" if recovering[-1] else "ended on the base"
+
+
+def grasps(gripper: np.ndarray, recovering: np.ndarray) -> int:
+    """Close commands sent while recovering: steps whose (n,) gripper command turns > 0 from <= 0."""
+    closing = (gripper[1:] > 0) & (gripper[:-1] <= 0)
+    return int((closing & recovering[1:]).sum())
+
+
+def tilt_degrees(quat_wxyz: np.ndarray) -> float:
+    """Angle between a body's z axis and the world's vertical, degrees, from its (4,) wxyz quaternion."""
+    w, x, y, _ = quat_wxyz / np.linalg.norm(quat_wxyz)
+    zz = 1.0 - 2.0 * (x * x + y * y)  # the z component of the body's z axis
+    return float(np.degrees(np.arccos(np.clip(zz, -1.0, 1.0))))
+
+
+def replay(env, seed: int, actions: np.ndarray, steps: int) -> dict:
+    """Re-simulate one episode of `env` (a SquareOcrEnv): the first `steps` of (T, 10) actions ->
+    the nut's poses (steps+1, 7), per-step success (steps,), and at the end the handle and end effector
+    positions (3,) and the peg's (3,)."""
+    obs, _ = env.reset(seed=seed)
+    poses, success = [obs["object_pose"]], []
+    for t in range(steps):
+        obs, r, *_ = env.step(actions[t])
+        poses.append(obs["object_pose"])
+        success.append(r >= 1.0)
+    eef, _ = env.eef_pose()
+    return {
+        "pose": np.array(poses),
+        "success": np.array(success, dtype=bool),
+        "handle": env.handle_position(),
+        "eef": eef,
+        "peg": env.peg_position(),
+    }
+
+
+def episodes(cell: Path, region: str = "ood", failures_only: bool = False) -> list[dict]:
+    """The recorded episodes of `cell` (its env `region`) replayed and measured; with `failures_only`
+    the successful ones are listed from the records alone (no replay, no nut measurements).
+
+    Raises:
+        ValueError: a batch recorded without seeds (an unseeded eval cannot be replayed).
+    """
+    from lerobot_ocr.envs.square_env import SquareOcrEnv
+
+    env = SquareOcrEnv(region=region, render_mode=None)
+    out = []
+    for f in sorted((cell / "batches").glob("batch_*.npz")):
+        with np.load(f) as z:
+            meta = json.loads(str(z["meta"]))
+            actions, success, done = z["rollout.action"], z["rollout.success"], z["rollout.done"]
+            modes, score = z["stats.in_recovery"], z["stats.score"]
+        if meta["seeds"] is None:
+            raise ValueError(
+                f"{f} was recorded without env seeds: only a seeded eval (--seed) can be replayed."
+            )
+        steps, succ = episode_steps(done), success_steps(success)
+        for b, seed in enumerate(meta["seeds"]):
+            n = steps[b]
+            rec = modes[:n, b].astype(bool)
+            solved = succ[b] > 0
+            first_base = int(np.argmin(rec)) if rec[0] and not rec.all() else (0 if not rec[0] else -1)
+            finite = score[:n, b][np.isfinite(score[:n, b])]
+            row = {
+                "seed": int(seed),
+                "started_ood": bool(rec[0]),
+                "steps": int(n),
+                "success_step": int(succ[b]),
+                "ending": ending(rec, solved),
+                "first_base_step": first_base,
+                "entries": int(rec[0]) + int((~rec[:-1] & rec[1:]).sum()),
+                "recovery_fraction": float(rec.mean()),
+                "grasps_in_recovery": grasps(actions[b, :n, GRIPPER], rec),
+                "gripper_closed_at_end": bool(actions[b, n - 1, GRIPPER] > 0),
+                "last_score": float(finite[-1]) if len(finite) else float("nan"),
+            }
+            if not (failures_only and solved):
+                rep = replay(env, int(seed), actions[b], n)
+                hits = np.nonzero(rep["success"])[0]
+                pose, start = rep["pose"][-1], rep["pose"][0]
+                rest = rep["pose"][min(SETTLE, n), 2]  # the reset leaves the nut 6 cm up: it drops, settles
+                row |= {
+                    "replay_success_step": int(hits[0] + 1) if len(hits) else -1,
+                    "nut_lift_cm": float(100 * (pose[2] - rest)),
+                    "max_lift_cm": float(100 * (rep["pose"][:, 2].max() - rest)),
+                    "nut_tilt_deg": tilt_degrees(pose[3:7]),
+                    "nut_peg_cm": float(100 * np.linalg.norm(pose[:2] - rep["peg"][:2])),
+                    "nut_moved_cm": float(100 * np.linalg.norm(pose[:2] - start[:2])),
+                    "nut_region": env.regions.classify(pose[:2]),
+                    "eef_handle_cm": float(100 * np.linalg.norm(rep["eef"] - rep["handle"])),
+                    "tail_motion_cm": float(
+                        100 * np.linalg.norm(rep["pose"][-1, :3] - rep["pose"][max(0, n - 100), :3])
+                    ),
+                }
+            out.append(row)
+    env.close()
+    return out
+
+
+KEYS = (
+    "steps",
+    "entries",
+    "recovery_fraction",
+    "grasps_in_recovery",
+    "last_score",
+    "nut_lift_cm",
+    "max_lift_cm",
+    "nut_tilt_deg",
+    "nut_peg_cm",
+    "nut_moved_cm",
+    "eef_handle_cm",
+    "tail_motion_cm",
+)
+
+
+def describe(rows: list[dict]) -> dict:
+    """(p25, median, p75) of each of KEYS over `rows` (NaN and absent values left out)."""
+    out = {"n": len(rows)}
+    for k in KEYS:
+        v = np.array([r.get(k, np.nan) for r in rows], dtype=float)
+        v = v[np.isfinite(v)]
+        out[k] = [round(float(x), 2) for x in np.percentile(v, [25, 50, 75])] if len(v) else None
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cell", required=True, help="a joint eval cell's --output_dir (with batches/)")
+    parser.add_argument("--region", default="ood", help="the cell's --env.region")
+    parser.add_argument("--failures-only", action="store_true", help="replay only the failed episodes")
+    parser.add_argument("--out", default=None, help="write the per-episode rows and the summary here")
+    args = parser.parse_args()
+    rows = episodes(Path(args.cell), args.region, args.failures_only)
+    replayed = [r for r in rows if "replay_success_step" in r]
+    mismatched = [r["seed"] for r in replayed if r["success_step"] != r["replay_success_step"]]
+    endings = ("solved", "never handed back", "ended in a later recovery", "ended on the base")
+    groups = {e: describe([r for r in rows if r["ending"] == e]) for e in endings}
+    summary = {"cell": args.cell, "episodes": len(rows), "replay_mismatches": mismatched, "groups": groups}
+    print(f"{args.cell}: {len(rows)} episodes, {len(mismatched)} replay mismatches; median [p25, p75]")
+    print("| ending | n | " + " | ".join(KEYS) + " |")
+    print("|---|---|" + "---|" * len(KEYS))
+    for name, g in groups.items():
+        cells = [f"{g[k][1]:g} [{g[k][0]:g}, {g[k][2]:g}]" if g[k] else "—" for k in KEYS]
+        print(f"| {name} | {g['n']} | " + " | ".join(cells) + " |")
+    print("\nfailures: seed, ending, entries, grasps, lift, tilt, peg, region, eef-handle, tail (cm / deg)")
+    for r in rows:
+        if r["ending"] != "solved" and "nut_lift_cm" in r:
+            print(
+                f"  {r['seed']}: {r['ending']}, {r['entries']} entries, {r['grasps_in_recovery']} grasps, "
+                f"lift {r['nut_lift_cm']:.1f}, tilt {r['nut_tilt_deg']:.0f}, peg {r['nut_peg_cm']:.1f}, "
+                f"{r['nut_region']}, eef {r['eef_handle_cm']:.1f}, tail {r['tail_motion_cm']:.1f}"
+            )
+    if args.out:
+        Path(args.out).write_text(json.dumps({**summary, "rows": rows}, indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -29,6 +29,7 @@ sys.path[:0] = [str(HERE.parent / "src")]
 
 from lerobot_ocr.constants import PUSHT_GOAL_POSE  # noqa: E402
 from lerobot_ocr.eval_report import decisions_at, episode_steps, success_steps  # noqa: E402
+from lerobot_ocr.eval_resume import replayable_batches  # noqa: E402
 
 
 def angle_error(theta: np.ndarray) -> np.ndarray:
@@ -83,18 +84,12 @@ def episodes(cell: Path, episode_length: int, decision_budget: int, region: str 
     from lerobot_ocr.experts.pusht_expert import pose_error
 
     out = []
-    for f in sorted((cell / "batches").glob("batch_*.npz")):
-        with np.load(f) as z:
-            meta = json.loads(str(z["meta"]))
-            actions, success, done = z["rollout.action"], z["rollout.success"], z["rollout.done"]
-            modes, decisions = z["stats.in_recovery"], z["stats.decisions"]
-        if meta["seeds"] is None:
-            raise ValueError(
-                f"{f} was recorded without env seeds: only a seeded eval (--seed) can be replayed."
-            )
+    names = ("rollout.action", "rollout.success", "rollout.done", "stats.in_recovery", "stats.decisions")
+    for seeds, arrays in replayable_batches(cell, names):
+        actions, success, done, modes, decisions = (arrays[n] for n in names)
         steps, succ = episode_steps(done), success_steps(success)
         dec = decisions_at(succ, decisions)
-        for b, seed in enumerate(meta["seeds"]):
+        for b, seed in enumerate(seeds):
             n = steps[b]
             rep = replay(seed, actions[b], n, episode_length, region)
             replayed = np.nonzero(rep["reward"] >= 1.0 - 1e-9)[0]

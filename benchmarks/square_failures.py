@@ -28,6 +28,7 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parent / "src")]
 
 from lerobot_ocr.eval_report import episode_steps, success_steps  # noqa: E402
+from lerobot_ocr.eval_resume import replayable_batches  # noqa: E402
 
 GRIPPER = -1  # the action's gripper command: -1 open, +1 closed (`square_env`)
 SETTLE = 30  # steps after a reset by which the nut has dropped onto the table (by 10), before a grasp
@@ -87,17 +88,11 @@ def episodes(cell: Path, region: str = "ood", failures_only: bool = False) -> li
 
     env = SquareOcrEnv(region=region, render_mode=None)
     out = []
-    for f in sorted((cell / "batches").glob("batch_*.npz")):
-        with np.load(f) as z:
-            meta = json.loads(str(z["meta"]))
-            actions, success, done = z["rollout.action"], z["rollout.success"], z["rollout.done"]
-            modes, score = z["stats.in_recovery"], z["stats.score"]
-        if meta["seeds"] is None:
-            raise ValueError(
-                f"{f} was recorded without env seeds: only a seeded eval (--seed) can be replayed."
-            )
+    names = ("rollout.action", "rollout.success", "rollout.done", "stats.in_recovery", "stats.score")
+    for seeds, arrays in replayable_batches(cell, names):
+        actions, success, done, modes, score = (arrays[n] for n in names)
         steps, succ = episode_steps(done), success_steps(success)
-        for b, seed in enumerate(meta["seeds"]):
+        for b, seed in enumerate(seeds):
             n = steps[b]
             rec = modes[:n, b].astype(bool)
             solved = succ[b] > 0

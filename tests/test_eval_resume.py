@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from lerobot_ocr.eval_resume import BatchRecords, recorded_keys, run_key
+from lerobot_ocr.eval_resume import BatchRecords, recorded_keys, replayable_batches, run_key
 from lerobot_ocr.pipeline import clear_for_resume
 
 
@@ -42,6 +42,21 @@ def test_a_record_gives_back_the_batch_and_the_rng_states_after_it(tmp_path):
         assert back[name].dtype == t.dtype and torch.equal(back[name], t)
     np.testing.assert_array_equal(stats_back["in_recovery"], modes)
     assert stats_back["decisions"] is None and stats_back["started_ood"] == [True, False]
+
+
+def test_replayable_batches_give_seeds_and_arrays_in_order_and_refuse_unseeded_ones(tmp_path):
+    records = BatchRecords(tmp_path, "k", resume=False)
+    modes = np.array([[True, False]] * 5)
+    first, second = rollout(), rollout()
+    records.save(0, first, {"in_recovery": modes}, None, seeds=[7, 8], seconds=1.0)
+    records.save(1, second, {"in_recovery": ~modes}, None, seeds=[9, 10], seconds=1.0)
+    got = list(replayable_batches(tmp_path, ("rollout.action", "stats.in_recovery")))
+    assert [seeds for seeds, _ in got] == [[7, 8], [9, 10]]
+    np.testing.assert_array_equal(got[1][1]["rollout.action"], second["action"].numpy())
+    np.testing.assert_array_equal(got[0][1]["stats.in_recovery"], modes)
+    records.save(2, rollout(), None, None, seeds=None, seconds=1.0)  # an eval without --seed
+    with pytest.raises(ValueError, match="without env seeds"):
+        list(replayable_batches(tmp_path, ("rollout.action",)))
 
 
 def save(records, k, rows=2):

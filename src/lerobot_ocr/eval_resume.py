@@ -155,6 +155,24 @@ def recorded_keys(output_dir: str | Path) -> set[str]:
     return {m["key"] for m in recorded_metas(output_dir)}
 
 
+def replayable_batches(output_dir: str | Path, names: tuple[str, ...]):
+    """Yield (seeds, arrays) per batch recorded in `<output_dir>/batches/`, in file order: the env seeds of
+    its rows and its arrays `names` (e.g. "rollout.action", "stats.in_recovery"), to re-simulate episodes.
+
+    Raises:
+        ValueError: a batch recorded without seeds (an unseeded eval cannot be replayed).
+    """
+    for f in sorted((Path(output_dir) / RECORDS_DIR).glob("batch_*.npz")):
+        with np.load(f) as z:
+            seeds = json.loads(str(z["meta"]))["seeds"]
+            arrays = {name: z[name] for name in names}
+        if seeds is None:
+            raise ValueError(
+                f"{f} was recorded without env seeds: only a seeded eval (--seed) can be replayed."
+            )
+        yield seeds, arrays
+
+
 class BatchRecords:
     """The finished batches of one eval run in `<output_dir>/batches/`, written atomically.
 

@@ -4,14 +4,15 @@
 
 `lerobot-ocr eval` keeps each batch's actions, success flags, the switch's modes and the manifold's score
 (`batches/`), not the nut's poses. A seeded Square episode is deterministic given its actions (robosuite's
-reset draws from the seeded env), so this re-simulates each episode with its recorded actions (checking
-that the replay succeeds at the recorded step; `--failures-only` replays only the episodes that did not
-succeed) and reads the nut where it ends: its lift above the table (cm, from its resting height), its
-tilt (degrees between the nut's axis and the vertical: a nut lying on the table is ~0, tipped over ~90), its
-horizontal distance to the square peg (cm), whether it lies in the ID start box, and the end effector's
-distance to the nut's handle. From the records: how the episode ended (solved; never handed back; handed
-back, then ended in a later recovery; ended on the base), the recovery entries, how often the gripper
-closed while recovering (grasps and re-grasps), and the manifold's last recorded score.
+reset draws from the seeded env), so this re-simulates every episode with its recorded actions (checking
+that each replay succeeds at the recorded step, or never where the record never did) and reads the nut
+where it ends: its lift above the table (cm, from its resting height) and the most it was lifted, its
+tilt (degrees between the nut's axis and the vertical: lying flat ~0, tipped over ~90), its horizontal
+distance to the square peg and to the ID start box (cm), how far the end effector is from the nut's
+handle, and how far the nut moved over the last 100 steps. From the records: how the episode ended
+(solved; never handed back; handed back, then ended in a later recovery; ended on the base), the
+recovery entries, how often the gripper closed while recovering (grasps and re-grasps), and the
+manifold's last recorded score.
 No network runs. Prints a table per ending and one line per failure; writes `--out` (JSON) if given.
 """
 
@@ -27,10 +28,10 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parent / "src")]
 
-from lerobot_ocr.eval_report import episode_steps, success_steps  # noqa: E402
+from lerobot_ocr.eval_report import episode_modes, episode_steps, success_steps  # noqa: E402
 from lerobot_ocr.eval_resume import replayable_batches  # noqa: E402
 
-GRIPPER = -1  # the action's gripper command: -1 open, +1 closed (`square_env`)
+GRIPPER_INDEX = -1  # the action's gripper command: -1 open, +1 closed (`square_env`)
 SETTLE = 30  # steps after a reset by which the nut has dropped onto the table (by 10), before a grasp
 
 
@@ -45,9 +46,10 @@ def ending(recovering: np.ndarray, solved: bool) -> str:
 
 
 def grasps(gripper: np.ndarray, recovering: np.ndarray) -> int:
-    """Close commands sent while recovering: steps whose (n,) gripper command turns > 0 from <= 0."""
-    closing = (gripper[1:] > 0) & (gripper[:-1] <= 0)
-    return int((closing & recovering[1:]).sum())
+    """Close commands sent while recovering: steps whose (n,) gripper command turns > 0 from <= 0 (the
+    gripper starts open, so a close at step 0 counts)."""
+    closing = (gripper > 0) & (np.r_[-1.0, gripper[:-1]] <= 0)
+    return int((closing & recovering).sum())
 
 
 def tilt_degrees(quat_wxyz: np.ndarray) -> float:
@@ -77,9 +79,16 @@ def replay(env, seed: int, actions: np.ndarray, steps: int) -> dict:
     }
 
 
-def episodes(cell: Path, region: str = "ood", failures_only: bool = False) -> list[dict]:
-    """The recorded episodes of `cell` (its env `region`) replayed and measured; with `failures_only`
-    the successful ones are listed from the records alone (no replay, no nut measurements).
+def box_distance_cm(xy: np.ndarray, box_x: tuple[float, float], box_y: tuple[float, float]) -> float:
+    """Horizontal distance (cm) from a world (x, y) in metres to the box [box_x] x [box_y] (0 inside)."""
+    dx = max(box_x[0] - xy[0], 0.0, xy[0] - box_x[1])
+    dy = max(box_y[0] - xy[1], 0.0, xy[1] - box_y[1])
+    return float(100 * np.hypot(dx, dy))
+
+
+def episodes(cell: Path, region: str = "ood") -> list[dict]:
+    """Every recorded episode of `cell` (its env `region`) replayed and measured (nut heights from where
+    it rests after the reset's drop: step SETTLE, or the first close command if sooner).
 
     Raises:
         ValueError: a batch recorded without seeds (an unseeded eval cannot be replayed).
@@ -87,49 +96,49 @@ def episodes(cell: Path, region: str = "ood", failures_only: bool = False) -> li
     from lerobot_ocr.envs.square_env import SquareOcrEnv
 
     env = SquareOcrEnv(region=region, render_mode=None)
+    box = (env.regions.id_x, env.regions.id_y)
     out = []
     names = ("rollout.action", "rollout.success", "rollout.done", "stats.in_recovery", "stats.score")
     for seeds, arrays in replayable_batches(cell, names):
         actions, success, done, modes, score = (arrays[n] for n in names)
         steps, succ = episode_steps(done), success_steps(success)
+        per_row = episode_modes(modes, steps)
         for b, seed in enumerate(seeds):
             n = steps[b]
             rec = modes[:n, b].astype(bool)
-            solved = succ[b] > 0
-            first_base = int(np.argmin(rec)) if rec[0] and not rec.all() else (0 if not rec[0] else -1)
+            gripper = actions[b, :n, GRIPPER_INDEX]
             finite = score[:n, b][np.isfinite(score[:n, b])]
-            row = {
-                "seed": int(seed),
-                "started_ood": bool(rec[0]),
-                "steps": int(n),
-                "success_step": int(succ[b]),
-                "ending": ending(rec, solved),
-                "first_base_step": first_base,
-                "entries": int(rec[0]) + int((~rec[:-1] & rec[1:]).sum()),
-                "recovery_fraction": float(rec.mean()),
-                "grasps_in_recovery": grasps(actions[b, :n, GRIPPER], rec),
-                "gripper_closed_at_end": bool(actions[b, n - 1, GRIPPER] > 0),
-                "last_score": float(finite[-1]) if len(finite) else float("nan"),
-            }
-            if not (failures_only and solved):
-                rep = replay(env, int(seed), actions[b], n)
-                hits = np.nonzero(rep["success"])[0]
-                pose, start = rep["pose"][-1], rep["pose"][0]
-                rest = rep["pose"][min(SETTLE, n), 2]  # the reset leaves the nut 6 cm up: it drops, settles
-                row |= {
+            rep = replay(env, int(seed), actions[b], n)
+            hits = np.nonzero(rep["success"])[0]
+            closed = np.nonzero(gripper > 0)[0]
+            settled = min(SETTLE, n, int(closed[0]) if len(closed) else n)
+            rest, pose = rep["pose"][settled], rep["pose"][-1]
+            out.append(
+                {
+                    "seed": int(seed),
+                    "started_ood": bool(rec[0]),
+                    "steps": int(n),
+                    "success_step": int(succ[b]),
                     "replay_success_step": int(hits[0] + 1) if len(hits) else -1,
-                    "nut_lift_cm": float(100 * (pose[2] - rest)),
-                    "max_lift_cm": float(100 * (rep["pose"][:, 2].max() - rest)),
+                    "ending": ending(rec, succ[b] > 0),
+                    "first_base_step": per_row["first_base_step"][b],
+                    "entries": int(rec[0]) + int((~rec[:-1] & rec[1:]).sum()),
+                    "recovery_fraction": per_row["recovery_fraction"][b],
+                    "grasps_in_recovery": grasps(gripper, rec),
+                    "gripper_closed_at_end": bool(gripper[-1] > 0),
+                    "last_score": float(finite[-1]) if len(finite) else float("nan"),
+                    "nut_lift_cm": float(100 * (pose[2] - rest[2])),
+                    "max_lift_cm": float(100 * (rep["pose"][settled:, 2].max() - rest[2])),
                     "nut_tilt_deg": tilt_degrees(pose[3:7]),
                     "nut_peg_cm": float(100 * np.linalg.norm(pose[:2] - rep["peg"][:2])),
-                    "nut_moved_cm": float(100 * np.linalg.norm(pose[:2] - start[:2])),
-                    "nut_region": env.regions.classify(pose[:2]),
+                    "nut_moved_cm": float(100 * np.linalg.norm(pose[:2] - rest[:2])),
+                    "nut_id_box_cm": box_distance_cm(pose[:2], *box),
                     "eef_handle_cm": float(100 * np.linalg.norm(rep["eef"] - rep["handle"])),
                     "tail_motion_cm": float(
-                        100 * np.linalg.norm(rep["pose"][-1, :3] - rep["pose"][max(0, n - 100), :3])
+                        100 * np.linalg.norm(pose[:3] - rep["pose"][max(settled, n - 100), :3])
                     ),
                 }
-            out.append(row)
+            )
     env.close()
     return out
 
@@ -145,6 +154,7 @@ KEYS = (
     "nut_tilt_deg",
     "nut_peg_cm",
     "nut_moved_cm",
+    "nut_id_box_cm",
     "eef_handle_cm",
     "tail_motion_cm",
 )
@@ -164,12 +174,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cell", required=True, help="a joint eval cell's --output_dir (with batches/)")
     parser.add_argument("--region", default="ood", help="the cell's --env.region")
-    parser.add_argument("--failures-only", action="store_true", help="replay only the failed episodes")
     parser.add_argument("--out", default=None, help="write the per-episode rows and the summary here")
     args = parser.parse_args()
-    rows = episodes(Path(args.cell), args.region, args.failures_only)
-    replayed = [r for r in rows if "replay_success_step" in r]
-    mismatched = [r["seed"] for r in replayed if r["success_step"] != r["replay_success_step"]]
+    rows = episodes(Path(args.cell), args.region)
+    mismatched = [r["seed"] for r in rows if r["success_step"] != r["replay_success_step"]]
     endings = ("solved", "never handed back", "ended in a later recovery", "ended on the base")
     groups = {e: describe([r for r in rows if r["ending"] == e]) for e in endings}
     summary = {"cell": args.cell, "episodes": len(rows), "replay_mismatches": mismatched, "groups": groups}
@@ -179,13 +187,13 @@ def main() -> None:
     for name, g in groups.items():
         cells = [f"{g[k][1]:g} [{g[k][0]:g}, {g[k][2]:g}]" if g[k] else "—" for k in KEYS]
         print(f"| {name} | {g['n']} | " + " | ".join(cells) + " |")
-    print("\nfailures: seed, ending, entries, grasps, lift, tilt, peg, region, eef-handle, tail (cm / deg)")
+    print("\nfailures: seed, ending, entries, grasps, lift, tilt, to peg, to ID box, eef-handle, tail")
     for r in rows:
-        if r["ending"] != "solved" and "nut_lift_cm" in r:
+        if r["ending"] != "solved":
             print(
                 f"  {r['seed']}: {r['ending']}, {r['entries']} entries, {r['grasps_in_recovery']} grasps, "
                 f"lift {r['nut_lift_cm']:.1f}, tilt {r['nut_tilt_deg']:.0f}, peg {r['nut_peg_cm']:.1f}, "
-                f"{r['nut_region']}, eef {r['eef_handle_cm']:.1f}, tail {r['tail_motion_cm']:.1f}"
+                f"box {r['nut_id_box_cm']:.1f}, eef {r['eef_handle_cm']:.1f}, tail {r['tail_motion_cm']:.1f}"
             )
     if args.out:
         Path(args.out).write_text(json.dumps({**summary, "rows": rows}, indent=1))

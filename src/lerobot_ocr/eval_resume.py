@@ -13,6 +13,8 @@ are deterministic). Batches whose videos are missing (cut while writing them) ru
 Writing a record takes milliseconds; one process, so none of the ≈ 80 s that an extra eval process
 costs on Square (`benchmarks/EXPERIMENTS.md`, "Resumable eval cells in chunks").
 
+`replayable_batches` reads the records back for a replay of the episodes (`benchmarks/*_failures.py`).
+
 Our own: lerobot-eval has no resume, and `lerobot-train --resume` covers training only.
 """
 
@@ -24,6 +26,7 @@ import math
 import os
 import random
 import zipfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -155,13 +158,21 @@ def recorded_keys(output_dir: str | Path) -> set[str]:
     return {m["key"] for m in recorded_metas(output_dir)}
 
 
-def replayable_batches(output_dir: str | Path, names: tuple[str, ...]):
-    """Yield (seeds, arrays) per batch recorded in `<output_dir>/batches/`, in file order: the env seeds of
-    its rows and its arrays `names` (e.g. "rollout.action", "stats.in_recovery"), to re-simulate episodes.
+def replayable_batches(
+    output_dir: str | Path, names: tuple[str, ...]
+) -> Iterator[tuple[list[int], dict[str, np.ndarray]]]:
+    """Yield (seeds, arrays) per batch recorded in `<output_dir>/batches/`, in file order, to re-simulate
+    its episodes: the env seeds of its rows and its arrays `names` as recorded ("rollout.<name>": (B, T,
+    ...), "stats.<name>": (T, B)). Rows lerobot-eval ran past the cell's episodes (its last batch runs
+    whole; `eval_info.json` counts them) are left out of the seeds, so index the arrays by the seeds.
 
     Raises:
         ValueError: a batch recorded without seeds (an unseeded eval cannot be replayed).
     """
+    info = Path(output_dir) / "eval_info.json"
+    left = None
+    if info.exists():
+        left = sum(len(t["metrics"]["successes"]) for t in json.loads(info.read_text())["per_task"])
     for f in sorted((Path(output_dir) / RECORDS_DIR).glob("batch_*.npz")):
         with np.load(f) as z:
             seeds = json.loads(str(z["meta"]))["seeds"]
@@ -170,7 +181,10 @@ def replayable_batches(output_dir: str | Path, names: tuple[str, ...]):
             raise ValueError(
                 f"{f} was recorded without env seeds: only a seeded eval (--seed) can be replayed."
             )
-        yield seeds, arrays
+        if left is not None:
+            seeds, left = seeds[: max(left, 0)], left - len(seeds)
+        if seeds:
+            yield seeds, arrays
 
 
 class BatchRecords:

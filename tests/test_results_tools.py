@@ -356,3 +356,37 @@ def test_square_failure_endings_grasps_and_tilt():
     assert square_failures.tilt_degrees(np.array([np.cos(yaw), 0, 0, np.sin(yaw)])) == pytest.approx(
         0.0, abs=1e-6
     )
+
+
+def test_paired_comparison_counts_discordant_episodes_and_gives_the_exact_mcnemar_p(tmp_path):
+    import json
+
+    import paired
+
+    # the stall rule's recorded pairs (EXPERIMENTS.md): 24 / 5 -> 0.0005, 17 / 12 -> 0.46, 41 / 17 -> 0.002
+    assert paired.mcnemar_exact(24, 5) == pytest.approx(0.00052, abs=5e-5)
+    assert paired.mcnemar_exact(5, 24) == paired.mcnemar_exact(24, 5)
+    assert paired.mcnemar_exact(17, 12) == pytest.approx(0.458, abs=5e-3)
+    assert paired.mcnemar_exact(41, 17) == pytest.approx(0.0023, abs=3e-4)
+    assert paired.mcnemar_exact(0, 0) == 1.0
+
+    def run(name, success_step, decisions):
+        d = tmp_path / name
+        d.mkdir()
+        episodes = {"success_step": success_step, "decisions_at_success": decisions, "step_budget": 400,
+                    "decision_budget": 60}  # fmt: skip
+        (d / "episodes.json").write_text(json.dumps(episodes))
+        return d
+
+    a = run("a", [100, 500, -1, 300], [10, 50, -1, 70])
+    b = run("b", [100, 300, 700, -1], [10, 30, 55, -1])
+    result = paired.compare(a, b)
+    assert result["strict"] == {"n": 4, "rate_a": 0.5, "rate_b": 0.5, "only_a": 1, "only_b": 1,
+                                     "p_mcnemar": 1.0}  # fmt: skip
+    ref = result["reference_budget"]
+    assert (ref["rate_a"], ref["rate_b"], ref["only_a"], ref["only_b"]) == (0.5, 0.75, 0, 1)
+    assert (result["whole_episode"]["only_a"], result["whole_episode"]["only_b"]) == (1, 1)
+    with pytest.raises(ValueError, match="other episodes"):
+        paired.compare(a, run("c", [100, 300], [10, 30]))
+    with pytest.raises(ValueError, match="episodes.json is missing"):
+        paired.compare(a, tmp_path)

@@ -406,7 +406,6 @@ def run_eval(args: list[str]) -> dict:
             "mean_recovery_fraction": sum(fractions) / len(fractions) if fractions else 0.0,
             "recovery_chunks": sum(sum(e["recovery_chunks"]) for e in episodes),
             "handbacks": sum(sum(e["handbacks"]) for e in episodes),
-            "carried_chunks": sum(b.get("carried_chunks", 0) for b in batches),  # PROBE (whole batches)
             "threshold": batches[0]["threshold"] if batches else None,
             # per episode, in eval_info's order (batches run one after another, rows in env order)
             "started_ood": [bool(f) for b in batches for f in b["started_ood"]],

@@ -117,22 +117,18 @@ class RecoveryPlanner:
         self,
         keypoints: torch.Tensor,
         recovery_vector: torch.Tensor,
-        distance: torch.Tensor | None,
+        distance: torch.Tensor,
         max_delay: torch.Tensor | None = None,
-        delay: int | None = None,
     ) -> torch.Tensor:
         """(B, K, D) world keypoints, (B, D) or (B, K, D) recovery vectors, (B,) end-effector-to-object
         distances -> (B, L, K, D) keypoint plan whose frame 0 is `keypoints`.
 
         max_delay: (B,) optional integer cap on each row's still frames (e.g. fewer after a chunk that
-        left the object where it was); a cap >= horizon changes nothing. PROBE `delay` replaces the
-        schedule (e.g. 0: move at once)."""
+        left the object where it was); a cap >= horizon changes nothing."""
         vec = recovery_vector
         if self.normalize:
             norm = torch.linalg.vector_norm(vec, dim=-1, keepdim=True)
             vec = vec / norm.clamp_min(torch.finfo(vec.dtype).tiny)
-        if delay is not None:
-            return plan_keypoint_trajectory(keypoints, vec, self.step_size, self.horizon, delay)
         if self.fixed_delay is None:
             delay = recovery_delay(distance, self.d_min, self.d_max, self.horizon)
         else:
@@ -142,19 +138,3 @@ class RecoveryPlanner:
         if max_delay is not None:
             delay = torch.minimum(delay, max_delay.to(delay))
         return plan_keypoint_trajectory(keypoints, vec, self.step_size, self.horizon, delay)
-
-
-def carry_along_plan(plan: torch.Tensor, last_action: torch.Tensor) -> torch.Tensor:
-    """Actions that carry a held object along its keypoint plan: (R, L, K, D), (R, A) -> (R, L, A).
-
-    Action t is `last_action` (an absolute end-effector target whose first D entries are the world
-    position) shifted by the plan's mean keypoint displacement from frame 0 to frame t + 1 (the last
-    action reaches the last frame); rotation and gripper entries are kept, so the grip holds.
-    """
-    d = plan.shape[-1]
-    centre = plan.mean(2)  # (R, L, D)
-    frame = torch.arange(1, plan.shape[1] + 1, device=plan.device).clamp_max(plan.shape[1] - 1)
-    shift = (centre[:, frame] - centre[:, :1]).to(last_action.dtype)
-    out = last_action[:, None].repeat(1, plan.shape[1], 1)
-    out[..., :d] += shift
-    return out

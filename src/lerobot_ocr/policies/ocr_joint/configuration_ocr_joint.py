@@ -120,11 +120,6 @@ class OcrJointConfig(PreTrainedConfig):
     n_recovery_action_steps: int = 8
     stall_distance: float | None = None
     stall_delay: int = 4
-    # PROBE (probe/carry-along-plan, not adopted unless measured): prehensile tasks, object units; a row
-    # whose previous recovery chunk ended with the gripper closed and moved the object (by more than this)
-    # with the end effector carries it along a plan that moves at once, shifting its last action.
-    carry_tolerance: float | None = None
-    gripper_action_index: int = -1
 
     # Keypoint inverse policy (LeRobot's diffusion U-Net).
     down_dims: tuple[int, ...] = (256, 512, 1024)

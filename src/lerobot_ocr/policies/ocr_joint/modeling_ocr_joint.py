@@ -53,7 +53,7 @@ from lerobot_ocr.inverse_policy import KeypointInversePolicy
 from lerobot_ocr.joint_density import JointKeypointDensity
 from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
 from lerobot_ocr.manifold import KeypointManifold, RecoveryOutput
-from lerobot_ocr.planner import RecoveryPlanner, carry_along_plan
+from lerobot_ocr.planner import RecoveryPlanner
 from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
 from lerobot_ocr.policies.ocr_joint.processor_ocr_joint import make_ocr_joint_pre_post_processors
 from lerobot_ocr.policies.ocr_joint.switch import SwitchState, advance, decide, needs_check
@@ -382,7 +382,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._decisions: list[
             torch.Tensor
         ] = []  # per step, (B,) bool: the row got a new chunk (base or recovery)
-        self._n_chunks = self._n_handbacks = self._n_shortened = self._n_carried = 0
+        self._n_chunks = self._n_handbacks = self._n_shortened = 0
 
     def _start_rows(self, b: int, device: torch.device) -> None:
         """A first step, or a batch of another size or device (a new rollout): all rows start on the base."""
@@ -401,10 +401,6 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._unchecked = torch.full(
             (b,), float("nan"), dtype=torch.float64
         )  # the score where none was needed
-        d = self.config.object_dim
-        # end effector and object centre when each row's current recovery chunk began (carry_tolerance)
-        self._chunk_ee = torch.zeros(b, d, device=device)
-        self._chunk_centre = torch.zeros(b, d, device=device)
 
     def _observe(self, batch: dict[str, torch.Tensor]) -> Observed:
         """Pose -> keypoints -> score and recovery vector (one manifold evaluation for the batch)."""
@@ -480,64 +476,24 @@ class OcrJointPolicy(PreTrainedPolicy):
         cfg = self.config
         idx = rows.nonzero().squeeze(-1)
         recovery = obs.recovery.rows(idx)
-        carry = None
-        if cfg.carry_tolerance is not None:
-            keypoints, state = obs.keypoints[idx], obs.state[idx]
-            ee = state[:, cfg.ee_position_start : cfg.ee_position_start + keypoints.shape[-1]].to(keypoints)
-            centre = keypoints.mean(1)
-            continuing = self._switch.recovering[idx]  # not entering: its last chunk was a recovery chunk
-            last = self._chunk[idx, -1]
-            grasped = continuing & (last[:, cfg.gripper_action_index] > 0)
-            moved = centre - self._chunk_centre[idx].to(centre)
-            with_ee = torch.linalg.vector_norm(moved - (ee - self._chunk_ee[idx].to(ee)), dim=-1)
-            tol = cfg.carry_tolerance
-            carry = grasped & (torch.linalg.vector_norm(moved, dim=-1) > tol) & (with_ee < tol)
-            self._chunk_ee[idx] = ee.to(self._chunk_ee)
-            self._chunk_centre[idx] = centre.to(self._chunk_centre)
-        if carry is None or not bool(carry.any()):
-            max_delay = None
-            if cfg.stall_distance is not None:
-                if self._chunk_keypoints is None:
-                    self._chunk_keypoints = obs.keypoints.clone()
-                    self._chunk_pushes = torch.zeros(len(obs.keypoints), dtype=torch.bool, device=idx.device)
-                moved = torch.linalg.vector_norm(
-                    obs.keypoints[idx] - self._chunk_keypoints[idx], dim=-1
-                ).mean(-1)
-                stalled = (
-                    self._switch.recovering[idx] & self._chunk_pushes[idx] & (moved < cfg.stall_distance)
-                )
-                self._n_shortened += int(stalled.sum())
-                max_delay = torch.where(stalled, cfg.stall_delay, cfg.horizon)
-            actions, plan = self.recovery_actions(
-                obs.frames[idx],
-                obs.keypoints[idx],
-                obs.state[idx],
-                recovery,
-                noise=noise,
-                max_delay=max_delay,
-            )
-            n = self._chunk.shape[1]
-            self._chunk[idx] = actions[:, :n].to(self._chunk)
-            if cfg.stall_distance is not None:
-                self._chunk_keypoints[idx] = obs.keypoints[idx]
-                self._chunk_pushes[idx] = (plan[:, n - 1] != plan[:, 0]).flatten(1).any(-1).to(idx.device)
-            return
-        self._n_carried += int(carry.sum())
-        vector = recovery.vector[carry].to(obs.keypoints.dtype)
-        plan = self.planner(obs.keypoints[idx][carry], vector, None, delay=0)
-        carried = carry_along_plan(plan, self._chunk[idx][carry][:, -1].to(plan.dtype))
-        self._chunk[idx[carry]] = carried[:, : self._chunk.shape[1]].to(self._chunk)
-        rest = ~carry
-        if bool(rest.any()):
-            sub = idx[rest]
-            actions, _ = self.recovery_actions(
-                obs.frames[sub],
-                obs.keypoints[sub],
-                obs.state[sub],
-                recovery.rows(rest),
-                noise=None if noise is None else noise[rest],
-            )
-            self._chunk[sub] = actions[:, : self._chunk.shape[1]].to(self._chunk)
+        max_delay = None
+        if cfg.stall_distance is not None:
+            if self._chunk_keypoints is None:
+                self._chunk_keypoints = obs.keypoints.clone()
+                self._chunk_pushes = torch.zeros(len(obs.keypoints), dtype=torch.bool, device=idx.device)
+            moved = torch.linalg.vector_norm(obs.keypoints[idx] - self._chunk_keypoints[idx], dim=-1).mean(-1)
+            # recovering at the last step (not entering now) and its last plan pushed
+            stalled = self._switch.recovering[idx] & self._chunk_pushes[idx] & (moved < cfg.stall_distance)
+            self._n_shortened += int(stalled.sum())
+            max_delay = torch.where(stalled, cfg.stall_delay, cfg.horizon)
+        actions, plan = self.recovery_actions(
+            obs.frames[idx], obs.keypoints[idx], obs.state[idx], recovery, noise=noise, max_delay=max_delay
+        )
+        n = self._chunk.shape[1]
+        self._chunk[idx] = actions[:, :n].to(self._chunk)
+        if cfg.stall_distance is not None:
+            self._chunk_keypoints[idx] = obs.keypoints[idx]
+            self._chunk_pushes[idx] = (plan[:, n - 1] != plan[:, 0]).flatten(1).any(-1).to(idx.device)
 
     def _decide(self, obs: Observed | None, noise: torch.Tensor | None, device) -> torch.Tensor:
         """Switch the rows, plan the chunks they need, hand back; return the (B,) scores (NaN: unchecked)."""
@@ -660,7 +616,6 @@ class OcrJointPolicy(PreTrainedPolicy):
             "recovery_chunks": self._n_chunks,
             "handbacks": self._n_handbacks,
             "shortened_plans": self._n_shortened,  # recovery plans capped at stall_delay after a stall
-            "carried_chunks": self._n_carried,
             "score": scores,
             "in_recovery": modes,
             "decisions": torch.stack(self._decisions).numpy() if self._decisions else None,

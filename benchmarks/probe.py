@@ -105,7 +105,7 @@ def cell_command(
     Raises:
         ValueError: a change is given, the cell has not finished, or its batches are of another run.
     """
-    from lerobot_ocr.eval_resume import recorded_keys, run_key
+    from lerobot_ocr.eval_resume import finished_episodes, recorded_keys, run_key
 
     if change:
         raise ValueError(f"--from-cell records a cell as it ran; drop the change {change}.")
@@ -119,8 +119,7 @@ def cell_command(
             f"The batches in {cell} were not run on {checkpoint} from {region} starts with the benchmarks' "
             "protocol (another checkpoint, region, env or batch size); run the probe without --from-cell."
         )
-    info = json.loads((cell / "eval_info.json").read_text())
-    n = sum(len(t["metrics"]["successes"]) for t in info["per_task"])
+    n = finished_episodes(cell)
     if n != profile["episodes"]:
         raise ValueError(
             f"{cell} ran {n} episodes: pass --episodes {n} (the baseline's count is the cell's)."

@@ -182,10 +182,9 @@ def measured_recovery(cell: Path) -> dict:
     """`recovery_phases` over the recorded batches of a joint eval cell (`<cell>/batches/*.npz`), summed over
     its episodes (with `<cell>/eval_info.json`, only the first `n_episodes` rows: lerobot-eval runs whole
     batches)."""
-    info = cell / "eval_info.json"
-    n_episodes = None
-    if info.exists():
-        n_episodes = sum(len(t["metrics"]["successes"]) for t in json.loads(info.read_text())["per_task"])
+    from lerobot_ocr.eval_resume import finished_episodes
+
+    n_episodes = finished_episodes(cell)
     rows, offset = [], 0
     for f in sorted((cell / "batches").glob("batch_*.npz")):
         with np.load(f) as z:

@@ -7,7 +7,13 @@ import numpy as np
 import pytest
 import torch
 
-from lerobot_ocr.eval_resume import BatchRecords, recorded_keys, replayable_batches, run_key
+from lerobot_ocr.eval_resume import (
+    BatchRecords,
+    finished_episodes,
+    recorded_keys,
+    replayable_batches,
+    run_key,
+)
 from lerobot_ocr.pipeline import clear_for_resume
 
 
@@ -54,6 +60,11 @@ def test_replayable_batches_give_seeds_and_arrays_in_order_and_refuse_unseeded_o
     assert [seeds for seeds, _ in got] == [[7, 8], [9, 10]]
     np.testing.assert_array_equal(got[1][1]["rollout.action"], second["action"].numpy())
     np.testing.assert_array_equal(got[0][1]["stats.in_recovery"], modes)
+    assert finished_episodes(tmp_path) is None  # not finished: every recorded row counts
+    info = {"per_task": [{"metrics": {"successes": [True, False, False]}}]}  # lerobot-eval kept 3 of 4 rows
+    (tmp_path / "eval_info.json").write_text(json.dumps(info))
+    assert finished_episodes(tmp_path) == 3
+    assert [seeds for seeds, _ in replayable_batches(tmp_path, ("rollout.action",))] == [[7, 8], [9]]
     records.save(2, rollout(), None, None, seeds=None, seconds=1.0)  # an eval without --seed
     with pytest.raises(ValueError, match="without env seeds"):
         list(replayable_batches(tmp_path, ("rollout.action",)))

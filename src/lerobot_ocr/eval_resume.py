@@ -158,6 +158,15 @@ def recorded_keys(output_dir: str | Path) -> set[str]:
     return {m["key"] for m in recorded_metas(output_dir)}
 
 
+def finished_episodes(output_dir: str | Path) -> int | None:
+    """How many episodes the finished eval in `output_dir` counts (its `eval_info.json`; lerobot-eval runs
+    whole batches and drops the rows past `--eval.n_episodes`); None when it has not finished."""
+    info = Path(output_dir) / "eval_info.json"
+    if not info.exists():
+        return None
+    return sum(len(t["metrics"]["successes"]) for t in json.loads(info.read_text())["per_task"])
+
+
 def replayable_batches(
     output_dir: str | Path, names: tuple[str, ...]
 ) -> Iterator[tuple[list[int], dict[str, np.ndarray]]]:
@@ -169,10 +178,7 @@ def replayable_batches(
     Raises:
         ValueError: a batch recorded without seeds (an unseeded eval cannot be replayed).
     """
-    info = Path(output_dir) / "eval_info.json"
-    left = None
-    if info.exists():
-        left = sum(len(t["metrics"]["successes"]) for t in json.loads(info.read_text())["per_task"])
+    left = finished_episodes(output_dir)
     for f in sorted((Path(output_dir) / RECORDS_DIR).glob("batch_*.npz")):
         with np.load(f) as z:
             seeds = json.loads(str(z["meta"]))["seeds"]

@@ -426,3 +426,37 @@ def test_a_plan_that_held_still_is_no_stall(diffusion_base, converted_dataset):
     # all 16 frames still: no motion asked, none counted as a stall
     assert still_frames_of_plans(joint, [([OOD_POSE], far)] * 5) == [[15], [15], [15]]
     assert joint.ocr_stats()["shortened_plans"] == 0
+
+
+def test_a_held_object_is_carried_along_the_plan(diffusion_base, converted_dataset, monkeypatch):
+    """--policy.carry_tolerance: after a recovery chunk in which the object moved with the end effector and
+    the gripper ended closed, the next chunk shifts the last action along a plan that moves at once;
+    a row whose object moved without the end effector, or stayed put, samples the inverse policy."""
+    from conftest import TINY_OCR
+
+    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=2, carry_tolerance=1.0)
+    sampled = []
+
+    def sample(plan, state, frames, noise=None):
+        sampled.append(len(plan))
+        return torch.full((len(plan), TINY_OCR["horizon"], 2), 150.0)  # action[-1] > 0 reads "gripper closed"
+
+    monkeypatch.setattr(joint.inverse, "sample", sample)
+    joint.reset()
+    x, y, theta = OOD_POSE
+    for _ in range(2):
+        joint.select_action(observation([OOD_POSE] * 2, [[300.0, 100.0]] * 2))
+    assert sampled == [2]
+    # both objects moved 10 px right during that chunk; only row 0's end effector moved with it: row 0 holds
+    moved = [[x + 10, y, theta]] * 2
+    carried = [joint.select_action(observation(moved, [[310.0, 100.0], [300.0, 100.0]])) for _ in range(2)]
+    assert sampled == [2, 1] and joint.ocr_stats()["carried_chunks"] == 1
+    step = joint.config.step_size
+    first, second = carried[0][0] - 150.0, carried[1][0] - 150.0
+    assert torch.linalg.vector_norm(first).item() == pytest.approx(step, rel=1e-4)  # moves at once
+    assert torch.linalg.vector_norm(second).item() == pytest.approx(2 * step, rel=1e-4)
+    assert torch.equal(carried[0][1], torch.full((2,), 150.0))  # row 1: the inverse policy's action
+    # the object stayed put during the carried chunk: not held any more, the inverse policy plans again
+    for _ in range(2):
+        joint.select_action(observation(moved, [[320.0, 100.0], [300.0, 100.0]]))
+    assert sampled == [2, 1, 2] and joint.ocr_stats()["carried_chunks"] == 1

@@ -1,7 +1,7 @@
 import pytest
 import torch
 
-from lerobot_ocr.planner import RecoveryPlanner, plan_keypoint_trajectory, recovery_delay
+from lerobot_ocr.planner import RecoveryPlanner, carry_along_plan, plan_keypoint_trajectory, recovery_delay
 
 
 def test_delay_regions():
@@ -85,3 +85,29 @@ def test_max_delay_caps_each_rows_still_frames():
     still = [(plan[b, :, 0, 0] == 0).sum().item() for b in range(3)]
     assert still == [13, 5, 1]  # frame 0 plus the still frames: 12 (the cap is above it), 4, 0
     torch.testing.assert_close(plan[:, -1, 0, 0], torch.tensor([3.0, 11.0, 15.0]))
+
+
+def test_a_fixed_delay_replaces_the_schedule_and_needs_no_distance():
+    planner = RecoveryPlanner(horizon=4, step_size=2.0, d_min=0.0, d_max=1.0)
+    kps = torch.zeros(1, 2, 3)
+    vec = torch.tensor([[0.0, 3.0, 0.0]])  # normalised to unit length
+    plan = planner(kps, vec, None, delay=0)
+    torch.testing.assert_close(plan[0, :, 0, 1], torch.tensor([0.0, 2.0, 4.0, 6.0]))
+    with pytest.raises(ValueError, match="needs the end-effector distances"):
+        planner(kps, vec, None)
+
+
+def test_carry_along_plan_shifts_the_position_and_keeps_rotation_and_gripper():
+    # two keypoints whose centre moves 1 along x per frame; the action: xyz, two rotation numbers, gripper
+    plan = torch.zeros(1, 4, 2, 3)
+    plan[..., 0] = torch.arange(4.0)[:, None]
+    plan[:, :, 1, 2] = 5.0  # a fixed offset of one keypoint does not move the centre
+    last = torch.tensor([[10.0, 20.0, 30.0, 0.5, -0.5, 1.0]])
+    out = carry_along_plan(plan, last)
+    assert out.shape == (1, 4, 6)
+    torch.testing.assert_close(out[0, :, 0], torch.tensor([11.0, 12.0, 13.0, 13.0]))  # frames 1, 2, 3, 3
+    torch.testing.assert_close(out[0, :, 1:], last[0, 1:].expand(4, 5))
+    with pytest.raises(ValueError, match="fewer than the position"):
+        carry_along_plan(plan, last[:, :2])
+    with pytest.raises(ValueError, match=r"Need plan \(R, L, K, D\)"):
+        carry_along_plan(plan[0], last)

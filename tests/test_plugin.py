@@ -93,6 +93,12 @@ def test_config_rejects_bad_recovery_settings():
         OcrJointConfig(device="cpu", stall_distance=0.0)
     with pytest.raises(ValueError, match="stall_delay must be in"):
         OcrJointConfig(device="cpu", stall_distance=3.0, stall_delay=16)
+    with pytest.raises(ValueError, match="carry_tolerance must be > 0"):
+        OcrJointConfig(device="cpu", carry_tolerance=0.0)
+    with pytest.raises(ValueError, match="carry_tolerance needs the end effector"):
+        OcrJointConfig(device="cpu", carry_tolerance=0.005, ee_position_start=None)
+    with pytest.raises(ValueError, match="action_frame='none'"):
+        OcrJointConfig(device="cpu", carry_tolerance=0.005, action_frame="none")
     # off, the cap is not checked: a short horizon stays valid with the default stall_delay
     assert (
         OcrJointConfig(device="cpu", horizon=4, down_dims=(32, 64), n_recovery_action_steps=4).stall_delay

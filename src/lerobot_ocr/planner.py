@@ -117,18 +117,25 @@ class RecoveryPlanner:
         self,
         keypoints: torch.Tensor,
         recovery_vector: torch.Tensor,
-        distance: torch.Tensor,
+        distance: torch.Tensor | None,
         max_delay: torch.Tensor | None = None,
+        delay: int | None = None,
     ) -> torch.Tensor:
         """(B, K, D) world keypoints, (B, D) or (B, K, D) recovery vectors, (B,) end-effector-to-object
         distances -> (B, L, K, D) keypoint plan whose frame 0 is `keypoints`.
 
         max_delay: (B,) optional integer cap on each row's still frames (e.g. fewer after a chunk that
-        left the object where it was); a cap >= horizon changes nothing."""
+        left the object where it was); a cap >= horizon changes nothing. delay: still frames for every
+        row, replacing the schedule (0: move at once, as for an object already in the gripper); then
+        `distance` may be None."""
         vec = recovery_vector
         if self.normalize:
             norm = torch.linalg.vector_norm(vec, dim=-1, keepdim=True)
             vec = vec / norm.clamp_min(torch.finfo(vec.dtype).tiny)
+        if delay is not None:
+            return plan_keypoint_trajectory(keypoints, vec, self.step_size, self.horizon, delay)
+        if distance is None:
+            raise ValueError("RecoveryPlanner needs the end-effector distances unless `delay` is given.")
         if self.fixed_delay is None:
             delay = recovery_delay(distance, self.d_min, self.d_max, self.horizon)
         else:
@@ -138,3 +145,33 @@ class RecoveryPlanner:
         if max_delay is not None:
             delay = torch.minimum(delay, max_delay.to(delay))
         return plan_keypoint_trajectory(keypoints, vec, self.step_size, self.horizon, delay)
+
+
+def carry_along_plan(plan: torch.Tensor, last_action: torch.Tensor) -> torch.Tensor:
+    """Actions that carry an object held in the gripper along its keypoint plan: (R, L, K, D), (R, A) ->
+    (R, L, A).
+
+    A held object moves with the end effector, so the inverse of its plan is rigid: action t is
+    `last_action` (an absolute world end-effector target whose first D entries are the position, e.g.
+    the `pose:*` action frames) shifted by the plan's mean keypoint displacement from frame 0 to frame
+    t + 1 (the last action reaches the last frame). Rotation and gripper entries are kept, so the grip
+    holds. Used by `ocr_joint`'s `carry_tolerance` (beyond the paper; benchmarks/EXPERIMENTS.md, "The
+    Square chain retrained on another machine").
+
+    Raises:
+        ValueError: a plan not (R, L, K, D), or an action with fewer than D entries or other rows.
+    """
+    if plan.ndim != 4 or last_action.ndim != 2 or last_action.shape[0] != plan.shape[0]:
+        raise ValueError(
+            f"Need plan (R, L, K, D) and last_action (R, A), got {tuple(plan.shape)} and "
+            f"{tuple(last_action.shape)}."
+        )
+    d = plan.shape[-1]
+    if last_action.shape[1] < d:
+        raise ValueError(f"last_action has {last_action.shape[1]} entries, fewer than the position's {d}.")
+    centre = plan.mean(2)  # (R, L, D)
+    frame = torch.arange(1, plan.shape[1] + 1, device=plan.device).clamp_max(plan.shape[1] - 1)
+    shift = (centre[:, frame] - centre[:, :1]).to(last_action.dtype)
+    out = last_action[:, None].repeat(1, plan.shape[1], 1)
+    out[..., :d] += shift
+    return out

@@ -14,6 +14,8 @@ from pathlib import Path
 from lerobot_ocr.files import atomic_write
 
 # Every option `OcrJointConfig` had and no longer has (EXPERIMENTS.md: issue 20's and issue 21's tables).
+# `carry_tolerance` / `gripper_action_index`, retired on 2026-11-30, came back on 2026-12-04 with the
+# same meaning (a checkpoint that saved them loads as it is).
 RETIRED_OPTIONS = (
     "hysteresis",
     "latch",
@@ -24,8 +26,6 @@ RETIRED_OPTIONS = (
     "follow_fraction",
     "delay_countdown",
     "grasp_delay",
-    "gripper_action_index",
-    "carry_tolerance",
     "recovery_action_repeat",
     "handback_quantile",
     "handback_agreement",

@@ -81,6 +81,17 @@ class OcrJointConfig(PreTrainedConfig):
             executed actions (the distance ramp while the robot is far) is no stall. Defaults None
             (off), 4; `predict_action_chunk`, which has no memory, never applies it. Beyond the paper
             (benchmarks/EXPERIMENTS.md, "A plan that pushes sooner after a stalled chunk").
+        carry_tolerance: prehensile tasks (object units): a row whose last recovery chunk ended with the
+            gripper closed, and in which the object's keypoint centre moved by more than this and moved
+            with the end effector (their displacements differ by less than this), holds the object; its
+            next chunk carries it along a plan that moves at once, shifting the last action by the
+            plan's displacement (`planner.carry_along_plan`) instead of sampling the inverse policy,
+            which re-grasps what it already holds. Needs `ee_position_start` and absolute end-effector
+            position actions (`action_frame` "pose:*" or "point"). Default None (off); the shipped
+            Square config 0.005 (5 mm). `select_action` only. Beyond the paper (benchmarks/EXPERIMENTS.md,
+            "The Square chain retrained on another machine").
+        gripper_action_index: the action entry that commands the gripper, read as closed when > 0
+            (robosuite's and the Franka robot's -1 open / +1 close). Default -1 (the last).
     Inverse policy: LeRobot's diffusion U-Net (`down_dims`, ...), DDIM with `num_inference_steps`
         steps by default; `max_normalization_windows` training windows fit its normalisation.
     """
@@ -120,6 +131,8 @@ class OcrJointConfig(PreTrainedConfig):
     n_recovery_action_steps: int = 8
     stall_distance: float | None = None
     stall_delay: int = 4
+    carry_tolerance: float | None = None
+    gripper_action_index: int = -1
 
     # Keypoint inverse policy (LeRobot's diffusion U-Net).
     down_dims: tuple[int, ...] = (256, 512, 1024)
@@ -188,6 +201,21 @@ class OcrJointConfig(PreTrainedConfig):
             raise ValueError(
                 f"--policy.stall_delay must be in [0, horizon={self.horizon}), got {self.stall_delay}."
             )
+        if self.carry_tolerance is not None and not self.carry_tolerance > 0:
+            raise ValueError(
+                f"--policy.carry_tolerance must be > 0 (object units) or None, got {self.carry_tolerance}."
+            )
+        if self.carry_tolerance is not None and self.ee_position_start is None:
+            raise ValueError(
+                "--policy.carry_tolerance needs the end effector's position in the state: set "
+                "--policy.ee_position_start (or leave carry_tolerance None)."
+            )
+        if self.carry_tolerance is not None and FrameSpec.parse(self.action_frame).kind == "none":
+            raise ValueError(
+                "--policy.carry_tolerance shifts absolute end-effector position actions, but "
+                "action_frame='none' says the actions are not positions; use it with action_frame "
+                "'point' or 'pose:<rotation>' only."
+            )
         if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:
             raise ValueError(
                 f"--policy.fixed_delay must be in [0, horizon={self.horizon}) or None, got "
@@ -232,6 +260,13 @@ class OcrJointConfig(PreTrainedConfig):
             raise ValueError(
                 f"--policy.object_pose_state_index has {len(self.object_pose_state_index)} entries but "
                 f"pose_rotation={self.pose_rotation!r} needs {pose_size(self.pose_rotation)}."
+            )
+        action_size = self.output_features[ACTION].shape[-1]
+        if self.carry_tolerance is not None and not -action_size <= self.gripper_action_index < action_size:
+            raise ValueError(
+                f"--policy.gripper_action_index={self.gripper_action_index} is not an entry of the "
+                f"{action_size}-dim action; set it to the gripper command's index (or leave "
+                "carry_tolerance None)."
             )
         size = self.input_features[self.object_pose_key].shape[-1]
         if size != pose_size(self.pose_rotation):

@@ -53,7 +53,7 @@ from lerobot_ocr.inverse_policy import KeypointInversePolicy
 from lerobot_ocr.joint_density import JointKeypointDensity
 from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
 from lerobot_ocr.manifold import KeypointManifold, RecoveryOutput
-from lerobot_ocr.planner import RecoveryPlanner
+from lerobot_ocr.planner import RecoveryPlanner, carry_along_plan
 from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
 from lerobot_ocr.policies.ocr_joint.processor_ocr_joint import make_ocr_joint_pre_post_processors
 from lerobot_ocr.policies.ocr_joint.switch import SwitchState, advance, decide, needs_check
@@ -373,6 +373,10 @@ class OcrJointPolicy(PreTrainedPolicy):
         # that plan moved them within the executed actions (`stall_distance`)
         self._chunk_keypoints: torch.Tensor | None = None
         self._chunk_pushes: torch.Tensor | None = None
+        # per row: (B, D) end-effector position and keypoint centre where its last recovery chunk was
+        # planned (`carry_tolerance`)
+        self._chunk_ee: torch.Tensor | None = None
+        self._chunk_centre: torch.Tensor | None = None
 
     def _archive_stats(self) -> None:
         if getattr(self, "_scores", None):
@@ -382,7 +386,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._decisions: list[
             torch.Tensor
         ] = []  # per step, (B,) bool: the row got a new chunk (base or recovery)
-        self._n_chunks = self._n_handbacks = self._n_shortened = 0
+        self._n_chunks = self._n_handbacks = self._n_shortened = self._n_carried = 0
 
     def _start_rows(self, b: int, device: torch.device) -> None:
         """A first step, or a batch of another size or device (a new rollout): all rows start on the base."""
@@ -398,6 +402,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._switch = SwitchState.start(b, device)
         self._chunk = torch.zeros(b, self.config.n_recovery_action_steps, action_dim, device=device)
         self._chunk_keypoints = self._chunk_pushes = None
+        self._chunk_ee = self._chunk_centre = None
         self._unchecked = torch.full(
             (b,), float("nan"), dtype=torch.float64
         )  # the score where none was needed
@@ -471,29 +476,83 @@ class OcrJointPolicy(PreTrainedPolicy):
         With `stall_distance`, a row that was recovering already and whose last plan pushed (moved the
         keypoints within the executed actions) but left the object where it was gets at most
         `stall_delay` still frames; the rows' planned keypoints and pushes are remembered for the next
-        check, and `ocr_stats()["shortened_plans"]` counts the capped plans.
+        check, and `ocr_stats()["shortened_plans"]` counts the capped plans. With `carry_tolerance`, a
+        row that holds the object (`_held`) gets its chunk from `carry_along_plan` instead of the
+        inverse policy; `ocr_stats()["carried_chunks"]` counts them.
         """
         cfg = self.config
         idx = rows.nonzero().squeeze(-1)
         recovery = obs.recovery.rows(idx)
-        max_delay = None
-        if cfg.stall_distance is not None:
-            if self._chunk_keypoints is None:
-                self._chunk_keypoints = obs.keypoints.clone()
-                self._chunk_pushes = torch.zeros(len(obs.keypoints), dtype=torch.bool, device=idx.device)
-            moved = torch.linalg.vector_norm(obs.keypoints[idx] - self._chunk_keypoints[idx], dim=-1).mean(-1)
-            # recovering at the last step (not entering now) and its last plan pushed
-            stalled = self._switch.recovering[idx] & self._chunk_pushes[idx] & (moved < cfg.stall_distance)
-            self._n_shortened += int(stalled.sum())
-            max_delay = torch.where(stalled, cfg.stall_delay, cfg.horizon)
-        actions, plan = self.recovery_actions(
-            obs.frames[idx], obs.keypoints[idx], obs.state[idx], recovery, noise=noise, max_delay=max_delay
-        )
         n = self._chunk.shape[1]
-        self._chunk[idx] = actions[:, :n].to(self._chunk)
-        if cfg.stall_distance is not None:
+        held = self._held(obs, idx)
+        plan = torch.empty(len(idx), cfg.horizon, *obs.keypoints.shape[1:], dtype=obs.keypoints.dtype)
+        plan = plan.to(obs.keypoints.device)
+        if bool(held.any()):
+            self._n_carried += int(held.sum())
+            vector = recovery.vector[held].to(obs.keypoints.dtype)
+            plan[held] = self.planner(obs.keypoints[idx[held]], vector, None, delay=0)
+            last = self._chunk[idx[held], -1].to(plan.dtype)
+            self._chunk[idx[held]] = carry_along_plan(plan[held], last)[:, :n].to(self._chunk)
+        sampled = ~held
+        if bool(sampled.any()):
+            sub = idx[sampled]
+            max_delay = None
+            if cfg.stall_distance is not None:
+                if self._chunk_keypoints is None:
+                    self._chunk_keypoints = obs.keypoints.clone()
+                    self._chunk_pushes = torch.zeros(len(obs.keypoints), dtype=torch.bool, device=idx.device)
+                moved = torch.linalg.vector_norm(obs.keypoints[sub] - self._chunk_keypoints[sub], dim=-1)
+                # recovering at the last step (not entering now) and its last plan pushed
+                stalled = (
+                    self._switch.recovering[sub]
+                    & self._chunk_pushes[sub]
+                    & (moved.mean(-1) < cfg.stall_distance)
+                )
+                self._n_shortened += int(stalled.sum())
+                max_delay = torch.where(stalled, cfg.stall_delay, cfg.horizon)
+            actions, plan[sampled] = self.recovery_actions(
+                obs.frames[sub],
+                obs.keypoints[sub],
+                obs.state[sub],
+                recovery.rows(sampled) if bool(held.any()) else recovery,
+                noise=None if noise is None else noise[sampled.to(noise.device)],
+                max_delay=max_delay,
+            )
+            self._chunk[sub] = actions[:, :n].to(self._chunk)
+        if cfg.stall_distance is not None and self._chunk_keypoints is not None:
             self._chunk_keypoints[idx] = obs.keypoints[idx]
             self._chunk_pushes[idx] = (plan[:, n - 1] != plan[:, 0]).flatten(1).any(-1).to(idx.device)
+
+    def _held(self, obs: Observed, idx: torch.Tensor) -> torch.Tensor:
+        """(R,) bool for the recovering rows `idx`: does the row hold the object (`carry_tolerance`)?
+
+        Held: the row was recovering already, its last recovery chunk ended with the gripper closed
+        (action[gripper_action_index] > 0), and over that chunk the keypoint centre moved by more than
+        the tolerance and by the end effector's displacement within it (object units, world frame).
+        Remembers the rows' end-effector positions and centres for the next check. All False when off.
+        """
+        cfg = self.config
+        if cfg.carry_tolerance is None:
+            return torch.zeros(len(idx), dtype=torch.bool, device=idx.device)
+        keypoints = obs.keypoints[idx]
+        d = keypoints.shape[-1]
+        start = cfg.ee_position_start
+        ee = obs.state[idx, start : start + d].to(keypoints)
+        centre = keypoints.mean(1)
+        if self._chunk_ee is None:
+            self._chunk_ee = torch.zeros(
+                len(obs.keypoints), d, dtype=keypoints.dtype, device=keypoints.device
+            )
+            self._chunk_centre = torch.zeros_like(self._chunk_ee)
+        moved = centre - self._chunk_centre[idx]
+        apart = torch.linalg.vector_norm(moved - (ee - self._chunk_ee[idx]), dim=-1)
+        closed = self._chunk[idx, -1, cfg.gripper_action_index].to(keypoints.device) > 0
+        tol = cfg.carry_tolerance
+        continuing = self._switch.recovering[idx].to(keypoints.device)  # its last chunk was a recovery chunk
+        held = continuing & closed & (torch.linalg.vector_norm(moved, dim=-1) > tol) & (apart < tol)
+        self._chunk_ee[idx] = ee
+        self._chunk_centre[idx] = centre
+        return held.to(idx.device)
 
     def _decide(self, obs: Observed | None, noise: torch.Tensor | None, device) -> torch.Tensor:
         """Switch the rows, plan the chunks they need, hand back; return the (B,) scores (NaN: unchecked)."""
@@ -616,6 +675,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             "recovery_chunks": self._n_chunks,
             "handbacks": self._n_handbacks,
             "shortened_plans": self._n_shortened,  # recovery plans capped at stall_delay after a stall
+            "carried_chunks": self._n_carried,  # recovery chunks that carried a held object (carry_tolerance)
             "score": scores,
             "in_recovery": modes,
             "decisions": torch.stack(self._decisions).numpy() if self._decisions else None,

@@ -428,35 +428,55 @@ def test_a_plan_that_held_still_is_no_stall(diffusion_base, converted_dataset):
     assert joint.ocr_stats()["shortened_plans"] == 0
 
 
-def test_a_held_object_is_carried_along_the_plan(diffusion_base, converted_dataset, monkeypatch):
+def test_a_held_object_is_carried_along_the_plan(diffusion_base, converted_dataset, id_pose, monkeypatch):
     """--policy.carry_tolerance: after a recovery chunk in which the object moved with the end effector and
-    the gripper ended closed, the next chunk shifts the last action along a plan that moves at once;
-    a row whose object moved without the end effector, or stayed put, samples the inverse policy."""
-    from conftest import TINY_OCR
-
-    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=2, carry_tolerance=1.0)
-    sampled = []
+    the gripper ended closed, the next chunk shifts that row's last action along a plan that moves at
+    once; a row whose gripper ended open, or whose object stayed put, samples the inverse policy with its
+    own noise. Row 0 stays on the base, so the recovering rows are not the batch's first ones. With the
+    stall rule on too, a carried object that then stays put (it slipped) counts as a stall."""
+    horizon = TINY_OCR["horizon"]
+    joint = make_joint(
+        diffusion_base, converted_dataset, n_recovery_action_steps=2, stall_distance=3.0, stall_delay=4
+    )
+    # Push-T's action (x, y) has no gripper entry, so validation refuses carry_tolerance here; set after
+    # it, the y entry reads as the gripper command (> 0 closed)
+    joint.config.carry_tolerance, joint.config.gripper_action_index = 1.0, -1
+    calls = []
 
     def sample(plan, state, frames, noise=None):
-        sampled.append(len(plan))
-        return torch.full((len(plan), TINY_OCR["horizon"], 2), 150.0)  # action[-1] > 0 reads "gripper closed"
+        calls.append((len(plan), noise))
+        return state[:, None].expand(-1, horizon, -1).clone()  # target: where the end effector is
 
     monkeypatch.setattr(joint.inverse, "sample", sample)
     joint.reset()
     x, y, theta = OOD_POSE
+    # rows 1 and 2 recover; their chunks end with the gripper closed (y = 100) and open (y = -100)
+    states = [[200.0, 200.0], [300.0, 100.0], [300.0, -100.0]]
     for _ in range(2):
-        joint.select_action(observation([OOD_POSE] * 2, [[300.0, 100.0]] * 2))
-    assert sampled == [2]
-    # both objects moved 10 px right during that chunk; only row 0's end effector moved with it: row 0 holds
-    moved = [[x + 10, y, theta]] * 2
-    carried = [joint.select_action(observation(moved, [[310.0, 100.0], [300.0, 100.0]])) for _ in range(2)]
-    assert sampled == [2, 1] and joint.ocr_stats()["carried_chunks"] == 1
+        joint.select_action(observation([id_pose, OOD_POSE, OOD_POSE], states))
+    assert [n for n, _ in calls] == [2]
+    # both objects moved 10 px right with their end effectors; only row 1's gripper was closed
+    moved = [id_pose, [x + 10, y, theta], [x + 10, y, theta]]
+    states = [[200.0, 200.0], [310.0, 100.0], [310.0, -100.0]]
+    noise = torch.stack([torch.full((horizon, 2), 1.0), torch.full((horizon, 2), 2.0)])
+    actions = [joint.select_action(observation(moved, states), noise=noise)]
+    actions.append(joint.select_action(observation(moved, states)))
+    assert [n for n, _ in calls] == [2, 1] and joint.ocr_stats()["carried_chunks"] == 1
+    assert joint.ocr_stats()["shortened_plans"] == 0
+    torch.testing.assert_close(calls[1][1], noise[1:])  # the sampled row got its own noise
     step = joint.config.step_size
-    first, second = carried[0][0] - 150.0, carried[1][0] - 150.0
+    first, second = actions[0][1] - torch.tensor([300.0, 100.0]), actions[1][1] - torch.tensor([300.0, 100.0])
     assert torch.linalg.vector_norm(first).item() == pytest.approx(step, rel=1e-4)  # moves at once
-    assert torch.linalg.vector_norm(second).item() == pytest.approx(2 * step, rel=1e-4)
-    assert torch.equal(carried[0][1], torch.full((2,), 150.0))  # row 1: the inverse policy's action
-    # the object stayed put during the carried chunk: not held any more, the inverse policy plans again
+    torch.testing.assert_close(second, 2 * first, rtol=1e-4, atol=1e-3)  # along one direction
+    assert actions[0][2].tolist() == [310.0, -100.0]  # row 2: the inverse policy's action
+    # the objects stayed put during these chunks: nothing is held, both rows sample again; row 1's carried
+    # plan moved the object and it did not move: a stall (row 2's plan held still: the robot was far)
     for _ in range(2):
-        joint.select_action(observation(moved, [[320.0, 100.0], [300.0, 100.0]]))
-    assert sampled == [2, 1, 2] and joint.ocr_stats()["carried_chunks"] == 1
+        joint.select_action(observation(moved, [[200.0, 200.0], [320.0, 100.0], [310.0, -100.0]]))
+    assert [n for n, _ in calls] == [2, 1, 2] and joint.ocr_stats()["carried_chunks"] == 1
+    assert joint.ocr_stats()["shortened_plans"] == 1
+
+
+def test_carry_needs_a_gripper_entry_in_the_action(diffusion_base, converted_dataset):
+    with pytest.raises(ValueError, match="is not a gripper entry of the 2-dim action"):
+        make_joint(diffusion_base, converted_dataset, carry_tolerance=0.005)

@@ -262,12 +262,16 @@ class OcrJointConfig(PreTrainedConfig):
                 f"pose_rotation={self.pose_rotation!r} needs {pose_size(self.pose_rotation)}."
             )
         action_size = self.output_features[ACTION].shape[-1]
-        if self.carry_tolerance is not None and not -action_size <= self.gripper_action_index < action_size:
-            raise ValueError(
-                f"--policy.gripper_action_index={self.gripper_action_index} is not an entry of the "
-                f"{action_size}-dim action; set it to the gripper command's index (or leave "
-                "carry_tolerance None)."
-            )
+        if self.carry_tolerance is not None:
+            moved = FrameSpec.parse(self.action_frame).world_size(self.object_dim)  # position (+ rotation)
+            index = self.gripper_action_index
+            if not -action_size <= index < action_size or index % action_size < moved:
+                raise ValueError(
+                    f"--policy.gripper_action_index={index} is not a gripper entry of the {action_size}-dim "
+                    f"action (its first {moved} entries are the end-effector target, action_frame="
+                    f"{self.action_frame!r}); set it to the gripper command's index, or leave "
+                    "carry_tolerance None (an action without a gripper cannot hold the object)."
+                )
         size = self.input_features[self.object_pose_key].shape[-1]
         if size != pose_size(self.pose_rotation):
             raise ValueError(

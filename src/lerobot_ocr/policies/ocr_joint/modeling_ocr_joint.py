@@ -473,34 +473,38 @@ class OcrJointPolicy(PreTrainedPolicy):
     def _plan_chunks(self, obs: Observed, rows: torch.Tensor, noise: torch.Tensor | None) -> None:
         """Fill the chunk of the rows in the (B,) mask `rows` with the first n recovery actions.
 
+        noise: (R, L, A) the inverse policy's initial noise for the R rows in `rows` (None: sampled).
         With `stall_distance`, a row that was recovering already and whose last plan pushed (moved the
         keypoints within the executed actions) but left the object where it was gets at most
         `stall_delay` still frames; the rows' planned keypoints and pushes are remembered for the next
         check, and `ocr_stats()["shortened_plans"]` counts the capped plans. With `carry_tolerance`, a
         row that holds the object (`_held`) gets its chunk from `carry_along_plan` instead of the
-        inverse policy; `ocr_stats()["carried_chunks"]` counts them.
+        inverse policy (its noise is unused); `ocr_stats()["carried_chunks"]` counts them. A carried
+        plan moves at once, so an object that then stays put (it slipped) counts as a stall.
         """
         cfg = self.config
         idx = rows.nonzero().squeeze(-1)
         recovery = obs.recovery.rows(idx)
         n = self._chunk.shape[1]
         held = self._held(obs, idx)
-        plan = torch.empty(len(idx), cfg.horizon, *obs.keypoints.shape[1:], dtype=obs.keypoints.dtype)
-        plan = plan.to(obs.keypoints.device)
+        stall = cfg.stall_distance is not None
+        if stall and self._chunk_keypoints is None:
+            self._chunk_keypoints = obs.keypoints.clone()
+            self._chunk_pushes = torch.zeros(len(obs.keypoints), dtype=torch.bool, device=idx.device)
+        pushes = torch.zeros(len(idx), dtype=torch.bool, device=idx.device)
         if bool(held.any()):
             self._n_carried += int(held.sum())
+            rows_held = idx[held]
             vector = recovery.vector[held].to(obs.keypoints.dtype)
-            plan[held] = self.planner(obs.keypoints[idx[held]], vector, None, delay=0)
-            last = self._chunk[idx[held], -1].to(plan.dtype)
-            self._chunk[idx[held]] = carry_along_plan(plan[held], last)[:, :n].to(self._chunk)
+            plan = self.planner(obs.keypoints[rows_held], vector, None, delay=0)
+            last = self._chunk[rows_held, -1].to(plan.dtype)
+            self._chunk[rows_held] = carry_along_plan(plan, last)[:, :n].to(self._chunk)
+            pushes[held] = (plan[:, n - 1] != plan[:, 0]).flatten(1).any(-1).to(idx.device)
         sampled = ~held
         if bool(sampled.any()):
             sub = idx[sampled]
             max_delay = None
-            if cfg.stall_distance is not None:
-                if self._chunk_keypoints is None:
-                    self._chunk_keypoints = obs.keypoints.clone()
-                    self._chunk_pushes = torch.zeros(len(obs.keypoints), dtype=torch.bool, device=idx.device)
+            if stall:
                 moved = torch.linalg.vector_norm(obs.keypoints[sub] - self._chunk_keypoints[sub], dim=-1)
                 # recovering at the last step (not entering now) and its last plan pushed
                 stalled = (
@@ -510,7 +514,7 @@ class OcrJointPolicy(PreTrainedPolicy):
                 )
                 self._n_shortened += int(stalled.sum())
                 max_delay = torch.where(stalled, cfg.stall_delay, cfg.horizon)
-            actions, plan[sampled] = self.recovery_actions(
+            actions, plan = self.recovery_actions(
                 obs.frames[sub],
                 obs.keypoints[sub],
                 obs.state[sub],
@@ -519,39 +523,43 @@ class OcrJointPolicy(PreTrainedPolicy):
                 max_delay=max_delay,
             )
             self._chunk[sub] = actions[:, :n].to(self._chunk)
-        if cfg.stall_distance is not None and self._chunk_keypoints is not None:
+            pushes[sampled] = (plan[:, n - 1] != plan[:, 0]).flatten(1).any(-1).to(idx.device)
+        if stall:
             self._chunk_keypoints[idx] = obs.keypoints[idx]
-            self._chunk_pushes[idx] = (plan[:, n - 1] != plan[:, 0]).flatten(1).any(-1).to(idx.device)
+            self._chunk_pushes[idx] = pushes
+        if cfg.carry_tolerance is not None:  # where this chunk starts, for the next `_held`
+            d = obs.keypoints.shape[-1]
+            self._chunk_ee[idx] = obs.state[idx, cfg.ee_position_start : cfg.ee_position_start + d].to(
+                self._chunk_ee
+            )
+            self._chunk_centre[idx] = obs.keypoints[idx].mean(1).to(self._chunk_centre)
 
     def _held(self, obs: Observed, idx: torch.Tensor) -> torch.Tensor:
-        """(R,) bool for the recovering rows `idx`: does the row hold the object (`carry_tolerance`)?
+        """(R,) bool for the rows `idx` about to get a recovery chunk: does the row hold the object?
 
-        Held: the row was recovering already, its last recovery chunk ended with the gripper closed
-        (action[gripper_action_index] > 0), and over that chunk the keypoint centre moved by more than
-        the tolerance and by the end effector's displacement within it (object units, world frame).
-        Remembers the rows' end-effector positions and centres for the next check. All False when off.
+        Held (`carry_tolerance`): the row was recovering already, its last recovery chunk ended with the
+        gripper closed (action[gripper_action_index] > 0), and over that chunk the keypoint centre moved
+        by more than the tolerance and by the end effector's displacement within it (object units,
+        world frame; where the chunk started is stored by `_plan_chunks`). All False when off.
         """
         cfg = self.config
         if cfg.carry_tolerance is None:
             return torch.zeros(len(idx), dtype=torch.bool, device=idx.device)
         keypoints = obs.keypoints[idx]
         d = keypoints.shape[-1]
-        start = cfg.ee_position_start
-        ee = obs.state[idx, start : start + d].to(keypoints)
-        centre = keypoints.mean(1)
         if self._chunk_ee is None:
             self._chunk_ee = torch.zeros(
                 len(obs.keypoints), d, dtype=keypoints.dtype, device=keypoints.device
             )
             self._chunk_centre = torch.zeros_like(self._chunk_ee)
-        moved = centre - self._chunk_centre[idx]
+        start = cfg.ee_position_start
+        ee = obs.state[idx, start : start + d].to(keypoints)
+        moved = keypoints.mean(1) - self._chunk_centre[idx]
         apart = torch.linalg.vector_norm(moved - (ee - self._chunk_ee[idx]), dim=-1)
         closed = self._chunk[idx, -1, cfg.gripper_action_index].to(keypoints.device) > 0
-        tol = cfg.carry_tolerance
         continuing = self._switch.recovering[idx].to(keypoints.device)  # its last chunk was a recovery chunk
+        tol = cfg.carry_tolerance
         held = continuing & closed & (torch.linalg.vector_norm(moved, dim=-1) > tol) & (apart < tol)
-        self._chunk_ee[idx] = ee
-        self._chunk_centre[idx] = centre
         return held.to(idx.device)
 
     def _decide(self, obs: Observed | None, noise: torch.Tensor | None, device) -> torch.Tensor:
@@ -622,9 +630,10 @@ class OcrJointPolicy(PreTrainedPolicy):
     ) -> torch.Tensor:
         """One action per row, (B, A) world frame, on the batch's device.
 
-        `batch` is the env observation after our preprocessor; `noise` seeds the inverse policy's
-        sampling of any recovery chunk planned at this step. Raises KeyError / ValueError for a
-        missing or non-finite object pose at a step that checks it (not inside a base chunk).
+        `batch` is the env observation after our preprocessor; `noise` ((R, L, A), one per row that gets
+        a recovery chunk at this step, in row order) seeds the inverse policy's sampling of those chunks.
+        Raises KeyError / ValueError for a missing or non-finite object pose at a step that checks it
+        (not inside a base chunk).
         """
         state = batch[self.config.state_key]
         b, device = (1 if state.ndim == 1 else state.shape[0]), state.device

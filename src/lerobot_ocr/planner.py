@@ -155,8 +155,8 @@ def carry_along_plan(plan: torch.Tensor, last_action: torch.Tensor) -> torch.Ten
     `last_action` (an absolute world end-effector target whose first D entries are the position, e.g.
     the `pose:*` action frames) shifted by the plan's mean keypoint displacement from frame 0 to frame
     t + 1 (the last action reaches the last frame). Rotation and gripper entries are kept, so the grip
-    holds. Used by `ocr_joint`'s `carry_tolerance` (beyond the paper; benchmarks/EXPERIMENTS.md, "The
-    Square chain retrained on another machine").
+    holds. Used by `ocr_joint`'s `carry_tolerance` (beyond the paper; benchmarks/EXPERIMENTS.md, "Carrying a
+    held nut, adopted").
 
     Raises:
         ValueError: a plan not (R, L, K, D), or an action with fewer than D entries or other rows.

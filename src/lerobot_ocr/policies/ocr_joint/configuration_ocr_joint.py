@@ -88,7 +88,7 @@ class OcrJointConfig(PreTrainedConfig):
             plan's displacement (`planner.carry_along_plan`) instead of sampling the inverse policy,
             which re-grasps what it already holds. Needs `ee_position_start` and absolute end-effector
             position actions (`action_frame` "pose:*" or "point"). Default None (off); the shipped
-            Square config 0.005 (5 mm): Square joint OOD 0.42 -> 0.63 on the same 100 starts. `select_action`
+            Square config 0.005 (5 mm): Square joint OOD 0.49 -> 0.645 on 200 paired starts. `select_action`
             only. Beyond the paper (benchmarks/EXPERIMENTS.md, "Carrying a held nut, adopted").
         gripper_action_index: the action entry that commands the gripper, read as closed when > 0
             (robosuite's and the Franka robot's -1 open / +1 close). Default -1 (the last).

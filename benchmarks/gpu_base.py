@@ -1,11 +1,18 @@
-"""The `gpu` row: the Push-T low-dim base trained with Diffusion Policy's own low-dim recipe on a GPU for a
-few minutes, then evaluated here on CPU beside the `cpu` row (same data, seeds and protocol).
+"""The `gpu` rows: low-dim networks trained with Diffusion Policy's own low-dim recipe on a GPU for a few
+minutes, then evaluated here on CPU beside the `cpu` rows (same data, seeds and protocol). Push-T trains
+its base there (the inverse policy is the `cpu` chain's); Square trains both its base and its inverse
+policy there, in two processes side by side.
 
     .venv/bin/python benchmarks/gpu_base.py pack                       # here: items + packages -> .gpu/
     python3 benchmarks/gpu_base.py train --seconds 420 --out "$OUT"    # on the GPU machine (bare torch)
     .venv/bin/python benchmarks/gpu_base.py evaluate --weights <dir>   # here: checkpoint, 4 cells, JSON
 
-and the paper's Table III on that row (after `evaluate`):
+    .venv/bin/python benchmarks/gpu_base.py pack --task square         # here: demos, both packs -> .gpu/
+    python3 benchmarks/gpu_base.py train --part base --seconds 390 --out "$OUT/base" &   # GPU machine
+    python3 benchmarks/gpu_base.py train --part inverse --seconds 390 --out "$OUT/inverse" & wait
+    .venv/bin/python benchmarks/gpu_base.py evaluate --task square --weights <dir>   # here: 4 cells
+
+and the paper's Table III on the Push-T row (after `evaluate`):
 
     .venv/bin/python benchmarks/gpu_base.py continual-pack             # here: collect, merge, pack -> .gpu/
     python3 benchmarks/gpu_base.py train --steps <the gpu base's> --out "$OUT"   # on the GPU machine
@@ -20,13 +27,23 @@ weights fit what the GPU machine sends back (its (256, 512, 1024) does not); bat
 
 `pack` computes every training item once with LeRobot's dataset, sampler rule (`drop_n_last_frames`) and
 preprocessor (normalisation), so the GPU machine needs only torch and LeRobot's pure-Python packages,
-which `pack` copies into `.gpu/site` (the GPU image has torch, numpy, huggingface_hub; no LeRobot).
+which `pack` copies into `.gpu/site.tar.gz` (the GPU image has torch, numpy, huggingface_hub; no LeRobot).
 `evaluate` wraps the new base with the inverse policy of a finished `cpu`-profile chain (`lerobot-ocr
 rebase`) and runs the four cells of `benchmarks/pusht_ocr.py` (resumable), writing
 `benchmarks/results/pusht_gpu.json` and RESULTS.md's "Push-T (gpu)" section. `continual-pack` has the
 row's joint policy collect OOD episodes (`benchmarks/continual.py`'s stage), merges them with the demos and
 packs the merged data into `.gpu/` (replacing the base's pack); `continual-evaluate` checks that the weights
 were trained exactly like the gpu base but on that pack, so the gpu base is the control.
+
+Square (`--task square`): `pack` runs the `cpu` chain's data stages (`pipeline.chain_data`: demos, base
+data, convert; resumable, shared with `benchmarks/square_ocr.py`), packs the base's items, and builds an
+ocr_joint checkpoint by the shipped training command with one step (`pipeline.ocr_train_args`): its
+manifold, threshold and the inverse policy's normalisation are fitted here exactly as a full training run
+fits them, and `.gpu/inverse.pt` holds that normalisation with the training table (keypoints, state,
+frames, actions per frame). `train --part inverse` trains `KeypointInversePolicy.compute_loss` on windows
+cut from that table (every frame a window start, as lerobot-train samples ocr_joint) with the same recipe;
+`evaluate --task square` puts its EMA weights into that checkpoint (refusing other normalisation), rebases
+it onto the gpu base and runs the Square cells, writing `square_gpu.json` and "Square (gpu)".
 """
 
 from __future__ import annotations
@@ -64,6 +81,9 @@ PACKAGES = (
 # Diffusion Policy's U-Net is (256, 512, 1024): 63.5 M parameters, 121 MiB even in fp16, more than the GPU
 # machine can send back (64 MiB). (128, 256, 512) is 16.6 M, 32 MiB in fp16, sent as 15 MiB shards.
 SHARD_BYTES = 15 * 2**20
+# Square's inverse policy, trained beside its base with the same recipe: both fp16 weight sets must fit the
+# 64 MiB that come back (base 31.8 MiB + inverse 26.0 MiB at (112, 224, 448); at (128, 256, 512) 33.3 MiB).
+INVERSE_DOWN_DIMS = (112, 224, 448)
 RECIPE = {
     "down_dims": (128, 256, 512),
     "batch": 256,
@@ -108,7 +128,14 @@ def base_config(meta):
 
 def pack(data: Path, repo_id: str = "local/pusht_base", out: Path = PACK) -> None:
     """Write `out/items.pt` (every normalised training item of the dataset at `data`, normalised with its
-    own statistics), `out/config/config.json` and `out/site`."""
+    own statistics), `out/config/config.json` and `out/site.tar.gz`."""
+    shutil.rmtree(out, ignore_errors=True)
+    pack_base(data, repo_id, out)
+    pack_site(out)
+
+
+def pack_base(data: Path, repo_id: str, out: Path) -> None:
+    """The base's training items (`out/items.pt`), config (`out/config/`) and their source (`source.json`)."""
     import torch
     from lerobot.datasets import EpisodeAwareSampler, LeRobotDataset
     from lerobot.datasets.factory import resolve_delta_timestamps
@@ -136,30 +163,101 @@ def pack(data: Path, repo_id: str = "local/pusht_base", out: Path = PACK) -> Non
     preprocessor, _ = make_pre_post_processors(cfg, dataset_stats=ds.meta.stats)
     batch = preprocessor(batch)
     batch = {k: v.cpu() for k, v in batch.items() if isinstance(v, torch.Tensor)}
-    shutil.rmtree(out, ignore_errors=True)
     (out / "config").mkdir(parents=True)
     torch.save(batch, out / "items.pt")
     cfg.save_pretrained(out / "config")
     (out / "source.json").write_text(json.dumps({"data": str(data.resolve()), "items": len(indices)}))
+    print(f"packed {len(indices)} base items, keys {sorted(batch)}")
+
+
+def pack_site(out: Path) -> None:
+    """LeRobot's pure-Python packages that the GPU image lacks, as `out/site.tar.gz` (a fifth of their size,
+    so a pack fits the 64 MiB that travel; `train` unpacks it)."""
+    import tarfile
+
     site = Path(next(p for p in sys.path if p.endswith("site-packages")))
-    for name in PACKAGES:
-        for src in [site / name, *site.glob(f"{name}-*.dist-info")]:
-            if src.is_dir():
-                shutil.copytree(src, out / "site" / src.name, ignore=shutil.ignore_patterns("__pycache__"))
-    for src in site.glob("av-*.dist-info"):  # its metadata only: LeRobot checks av's version at import
-        shutil.copytree(src, out / "site" / src.name)
-    for py in ("mergedeep.py",):
-        if (site / py).is_file():
-            shutil.copy(site / py, out / "site" / py)
+    sources = [src for name in PACKAGES for src in [site / name, *site.glob(f"{name}-*.dist-info")]]
+    sources += list(site.glob("av-*.dist-info"))  # its metadata only: LeRobot checks av's version at import
+    sources += [site / py for py in ("mergedeep.py",)]
+    with tarfile.open(out / "site.tar.gz", "w:gz") as tar:
+        for src in sources:
+            if src.exists():
+                tar.add(src, arcname=f"site/{src.name}", filter=_no_bytecode)
     size = sum(f.stat().st_size for f in out.rglob("*") if f.is_file())
-    print(f"packed {len(indices)} items, keys {sorted(batch)}, {size / 2**20:.1f} MiB in {out}")
+    print(f"{size / 2**20:.1f} MiB in {out}")
 
 
-def _import_lerobot(site: Path) -> None:
-    """Make LeRobot importable on the GPU image: our copies after its own packages; PyAV stubbed (only
-    video decoding needs it, and this script decodes no video)."""
+def _no_bytecode(info):
+    return None if "__pycache__" in info.name or info.name.endswith(".pyc") else info
+
+
+def pack_square(source: Path, work: Path, out: Path = PACK) -> None:
+    """Square's pack: the `cpu` chain's data stages in `source` (resumable), the base's items, an ocr_joint
+    checkpoint trained one step by the shipped command in `work/placeholder` (manifold, threshold and the
+    inverse policy's normalisation fitted as in a full run; its base: an untrained network of the recipe's
+    shape, replaced at `evaluate`), and `out/inverse.pt`: that normalisation, the network's arguments
+    (`inverse_policy_kwargs`) and the training table."""
+    import torch
+
+    from lerobot_ocr.pipeline import SQUARE, chain_data, ocr_train_args, run
+    from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy, inverse_policy_kwargs
+
+    p = SQUARE.profiles["cpu"]
+    data = chain_data(SQUARE, p, source)
+    shutil.rmtree(out, ignore_errors=True)
+    pack_base(data.base_data, data.base_repo, out)
+    placeholder = work / "placeholder"
+    shutil.rmtree(placeholder, ignore_errors=True)
+    base = placeholder / "base"
+    save_base_checkpoint(None, base, data.base_data, data.base_repo)
+    one_step = {**p, "ocr_steps": 1, "ocr_dims": str(list(INVERSE_DOWN_DIMS)), "ocr_batch": RECIPE["batch"]}
+    run(ocr_train_args(SQUARE, one_step, data, base, placeholder / "ocr"), work / "logs" / "placeholder.log")
+    joint = placeholder / "ocr" / "checkpoints" / "last" / "pretrained_model"
+    policy = OcrJointPolicy.from_pretrained(joint)
+    policy._load_training_table(data.converted)
+    k, d = policy.object_keypoints_.shape
+    kwargs = inverse_policy_kwargs(
+        policy.config, k, d, policy._tbl_state.shape[-1], policy._tbl_action.shape[-1]
+    )
+    table = {
+        "keypoints": policy._tbl_keypoints,
+        "state": policy._tbl_state,
+        "frames": policy._tbl_frames,
+        "action": policy._tbl_action,
+        "last": policy._tbl_last,
+    }
+    fitted = {k: v for k, v in policy.inverse.state_dict().items() if not k.startswith("diffusion.")}
+    torch.save(
+        {"kwargs": kwargs, "fitted": fitted, "table": table, "joint": str(joint.resolve())},
+        out / "inverse.pt",
+    )
+    source_json = json.loads((out / "source.json").read_text())
+    source_json["inverse"] = {"data": str(data.converted.resolve()), "windows": len(policy._tbl_index)}
+    (out / "source.json").write_text(json.dumps(source_json))
+    print(f"packed {len(policy._tbl_index)} inverse-policy windows (U-Net {list(INVERSE_DOWN_DIMS)})")
+    pack_site(out)
+
+
+def _import_lerobot(pack_dir: Path) -> None:
+    """Make LeRobot importable on the GPU image: our copies (`pack_dir/site`, unpacked from `site.tar.gz`
+    once, atomically, as two `train` processes may start together) after its own packages; PyAV stubbed
+    (only video decoding needs it, and this script decodes no video); `lerobot_ocr` as a bare namespace, so
+    its modules import without the package's `__init__` (which registers envs and robots)."""
     import importlib.machinery
+    import tarfile
+    import tempfile
+    import types
 
+    site = pack_dir / "site"
+    if not site.is_dir() and (pack_dir / "site.tar.gz").is_file():
+        staging = Path(tempfile.mkdtemp(dir=pack_dir))
+        with tarfile.open(pack_dir / "site.tar.gz") as tar:
+            tar.extractall(staging, filter="data")
+        try:
+            (staging / "site").rename(site)
+        except OSError:  # the other process was first
+            pass
+        shutil.rmtree(staging, ignore_errors=True)
     sys.path.append(str(site))
     try:
         import av  # noqa: F401
@@ -173,39 +271,102 @@ def _import_lerobot(site: Path) -> None:
 
         for name in ("av", "av.logging", "av.video", "av.audio", "av.container", "av.codec", "av.error"):
             sys.modules[name] = _Stub(name, (), {"__spec__": importlib.machinery.ModuleSpec(name, None)})
+    if "lerobot_ocr" not in sys.modules:
+        package = types.ModuleType("lerobot_ocr")
+        package.__path__ = [str(REPO / "src" / "lerobot_ocr")]
+        sys.modules["lerobot_ocr"] = package
 
 
-def train(pack_dir: Path, seconds: float, out: Path, steps: int | None = None) -> None:
-    """Train the base for about `seconds` on the GPU (or exactly `steps` steps); write to `out` its
-    config.json, its EMA weights as fp16 shards `ema_fp16_<i>.safetensors` (refreshed every minute, so a
-    cut run still returns them) and train_log.json."""
-    t0 = time.time()
-    _import_lerobot(pack_dir / "site")
+def _base_part(pack_dir: Path, device: str):
+    """The base: (items, build, loss, save_config) for `train`."""
     import torch
-    from diffusers.optimization import get_cosine_schedule_with_warmup
     from lerobot.configs.policies import PreTrainedConfig
     from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
+
+    cfg = PreTrainedConfig.from_pretrained(pack_dir / "config")
+    cfg.device = device
+    data = {k: v.to(device) for k, v in torch.load(pack_dir / "items.pt").items()}
+
+    def loss(policy, idx):
+        return policy.forward({k: v[idx] for k, v in data.items()})[0]
+
+    n = len(next(iter(data.values())))
+    return n, lambda: DiffusionPolicy(cfg).to(device).train(), loss, cfg.save_pretrained
+
+
+def _inverse_part(pack_dir: Path, device: str):
+    """Square's inverse policy: (windows, build, loss, save_config) for `train`; each window starts at a
+    frame of the packed table, the loss is `KeypointInversePolicy.compute_loss`, as in lerobot-train."""
+    import torch
+
+    from lerobot_ocr.dataset_columns import window_positions
+    from lerobot_ocr.inverse_policy import KeypointInversePolicy
+
+    packed = torch.load(pack_dir / "inverse.pt")
+    table = {k: v.to(device) for k, v in packed["table"].items()}
+    horizon = packed["kwargs"]["horizon"]
+
+    def build():
+        model = KeypointInversePolicy(**packed["kwargs"])
+        missing, unexpected = model.load_state_dict(packed["fitted"], strict=False)
+        if unexpected or any(not k.startswith("diffusion.") for k in missing):
+            raise RuntimeError(
+                f"inverse.pt does not fit the network: missing {missing}, unexpected {unexpected}"
+            )
+        return model.to(device).train()
+
+    def loss(model, idx):
+        win, is_pad = window_positions(idx, table["last"][idx], horizon)
+        return model.compute_loss(
+            table["keypoints"][win], table["state"][idx], table["frames"][idx], table["action"][win], is_pad
+        )
+
+    return len(table["last"]), build, loss, lambda out: None  # its arguments go into train_log.json
+
+
+def train(
+    pack_dir: Path,
+    seconds: float,
+    out: Path,
+    steps: int | None = None,
+    part: str = "base",
+    seed: int | None = None,
+) -> None:
+    """Train the base (`part` "base") or Square's inverse policy ("inverse") for about `seconds` on the GPU
+    (or exactly `steps` steps); write to `out` the base's config.json, the EMA weights as fp16 shards
+    `ema_fp16_<i>.safetensors` (refreshed every minute, so a cut run still returns them) and train_log.json
+    (with the inverse policy's arguments): at most 5 files, as the GPU machine returns 8. `seed` (default
+    the recipe's) seeds the initial weights, the noise and the batch order."""
+    seed = RECIPE["seed"] if seed is None else seed
+    t0 = time.time()
+    _import_lerobot(pack_dir)
+    import torch
+    from diffusers.optimization import get_cosine_schedule_with_warmup
     from torch.optim.swa_utils import AveragedModel
 
     torch.backends.cuda.matmul.allow_tf32 = True
     torch.backends.cudnn.allow_tf32 = True
     device = "cuda" if torch.cuda.is_available() else "cpu"  # cpu: a smoke test of this script only
     sync = torch.cuda.synchronize if device == "cuda" else (lambda: None)
-    cfg = PreTrainedConfig.from_pretrained(pack_dir / "config")
-    cfg.device = device
-    data = {k: v.to(device) for k, v in torch.load(pack_dir / "items.pt").items()}
+    n, make_model, loss_fn, save_config = (_base_part if part == "base" else _inverse_part)(pack_dir, device)
     pack_source = json.loads((pack_dir / "source.json").read_text())
-    n = len(next(iter(data.values())))
+    extra = {}  # for train_log.json
+    if part == "inverse":
+        pack_source = pack_source["inverse"]
+        extra["inverse_kwargs"] = torch.load(pack_dir / "inverse.pt")["kwargs"]
     batch_size = RECIPE["batch"]
 
     def ema_update(averaged, current, num_averaged):  # Diffusion Policy's EMA warm-up (power 0.75)
         step = int(num_averaged)
         decay = min(RECIPE["ema_max"], max(0.0, 1 - (1 + step) ** -RECIPE["ema_power"]))
-        torch._foreach_lerp_(averaged, current, 1 - decay)
+        if averaged[0].is_floating_point():  # AveragedModel calls this once per device and dtype
+            torch._foreach_lerp_(averaged, current, 1 - decay)
+        else:  # flags (the inverse policy's `fitted_`) are copied
+            torch._foreach_copy_(averaged, current)
 
     def build():
-        torch.manual_seed(RECIPE["seed"])
-        policy = DiffusionPolicy(cfg).to(device).train()
+        torch.manual_seed(seed)
+        policy = make_model()
         optimizer = torch.optim.AdamW(
             policy.parameters(),
             lr=RECIPE["lr"],
@@ -216,7 +377,7 @@ def train(pack_dir: Path, seconds: float, out: Path, steps: int | None = None) -
         return policy, optimizer
 
     def step_fn(policy, optimizer, idx):
-        loss, _ = policy.forward({k: v[idx] for k, v in data.items()})
+        loss = loss_fn(policy, idx)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(policy.parameters(), 10.0)  # lerobot-train's diffusion preset
@@ -243,7 +404,7 @@ def train(pack_dir: Path, seconds: float, out: Path, steps: int | None = None) -
     scheduler = get_cosine_schedule_with_warmup(optimizer, RECIPE["warmup"], steps)
     ema = AveragedModel(policy, multi_avg_fn=ema_update, use_buffers=True)
     log, losses, last_save, t_train = [], [], time.time(), time.time()
-    gen = torch.Generator(device=device).manual_seed(RECIPE["seed"])
+    gen = torch.Generator(device=device).manual_seed(seed)
     perm, pos = torch.randperm(n, device=device, generator=gen), 0
 
     def save(step):  # EMA weights in fp16 shards of at most SHARD_BYTES (the device tool's file limit)
@@ -262,9 +423,12 @@ def train(pack_dir: Path, seconds: float, out: Path, steps: int | None = None) -
             old.unlink()
         for i, shard in enumerate(shards):
             save_file(shard, out / f"ema_fp16_{i}.safetensors")
-        cfg.save_pretrained(out)
+        save_config(out)
         info = {
+            "part": part,
             "recipe": RECIPE,
+            "seed": seed,
+            **extra,
             "seconds_asked": None if steps_asked else seconds,
             "steps_asked": steps_asked,
             "steps_planned": steps,
@@ -323,22 +487,42 @@ def assemble_checkpoint(weights: Path, out: Path, data: Path, repo_id: str) -> N
     fp16 EMA shards, loaded back as fp32), with pre/post-processors from the statistics of the dataset at
     `data`, which must be the one `pack` made the items from (else SystemExit)."""
     from lerobot.configs.policies import PreTrainedConfig
-    from lerobot.datasets import LeRobotDatasetMetadata
-    from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
-    from lerobot.policies.factory import make_pre_post_processors
-    from safetensors.torch import load_file
+    from lerobot.policies.diffusion import configuration_diffusion  # noqa: F401  (registers "diffusion")
 
     cfg = PreTrainedConfig.from_pretrained(weights)
-    cfg.device = "cpu"
     check_trained_on(json.loads((weights / "train_log.json").read_text()), data, cfg)
-    policy = DiffusionPolicy(cfg)
+    save_base_checkpoint(load_shards(weights), out, data, repo_id, cfg)
+
+
+def load_shards(weights: Path) -> dict:
+    """The fp16 EMA shards `weights/ema_fp16_<i>.safetensors` as one fp32 state dict."""
+    from safetensors.torch import load_file
+
     state = {}
     for shard in sorted(weights.glob("ema_fp16_*.safetensors")):
         state.update(load_file(shard))
-    policy.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
+    if not state:
+        raise SystemExit(f"{weights} holds no ema_fp16_*.safetensors: pass the train command's --out folder.")
+    return {k: v.float() if v.is_floating_point() else v for k, v in state.items()}
+
+
+def save_base_checkpoint(state: dict | None, out: Path, data: Path, repo_id: str, cfg=None) -> None:
+    """A LeRobot `DiffusionPolicy` checkpoint in `out`: config `cfg` (default: `base_config` of the dataset
+    at `data`), weights `state` (None: untrained, seeded), processors from `data`'s statistics."""
+    import torch
+    from lerobot.datasets import LeRobotDatasetMetadata
+    from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
+    from lerobot.policies.factory import make_pre_post_processors
+
+    meta = LeRobotDatasetMetadata(repo_id, root=data)
+    cfg = cfg or base_config(meta)
+    cfg.device = "cpu"
+    torch.manual_seed(RECIPE["seed"])
+    policy = DiffusionPolicy(cfg)
+    if state is not None:
+        policy.load_state_dict(state)
     shutil.rmtree(out, ignore_errors=True)
     policy.save_pretrained(out)
-    meta = LeRobotDatasetMetadata(repo_id, root=data)
     for processor in make_pre_post_processors(cfg, dataset_stats=meta.stats):
         processor.save_pretrained(out)
 
@@ -432,6 +616,147 @@ Machine: {payload["machine"]}. Date: {payload["date"]}.
 Commands: `.venv/bin/python benchmarks/gpu_base.py pack --workdir {source}`; on the GPU machine
 `python3 benchmarks/gpu_base.py train --seconds {train_log.get("seconds_asked", "…")} --out $OUT`; here
 `.venv/bin/python benchmarks/gpu_base.py evaluate --weights {weights} --source {source}{batch_flag}`.
+""",
+    )
+
+
+def assemble_joint(inverse_weights: Path, placeholder: Path, base: Path, out: Path) -> None:
+    """The Square gpu row's ocr_joint checkpoint in `out`: the `pack --task square` checkpoint `placeholder`
+    (its manifold, threshold and fp32 normalisation) with the inverse network's EMA weights from
+    `inverse_weights` (the train command's `--part inverse` folder), rebased onto `base`.
+
+    Raises:
+        SystemExit: the weights were trained with another normalisation or network than `placeholder`
+            holds (a stale pack, or another chain's).
+    """
+    import tempfile
+
+    import torch
+
+    from lerobot_ocr.continual.rebase import rebase
+    from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
+
+    policy = OcrJointPolicy.from_pretrained(placeholder)
+    state = load_shards(inverse_weights)
+    own = policy.inverse.state_dict()
+    fitted = [k for k in own if not k.startswith("diffusion.")]
+    stale = [
+        k
+        for k in fitted
+        if k not in state
+        or not torch.equal(
+            own[k].to(torch.float16).float() if own[k].is_floating_point() else own[k], state[k]
+        )
+    ]
+    if stale or set(state) != set(own):
+        raise SystemExit(
+            f"{inverse_weights} was not trained on the normalisation of {placeholder} "
+            f"({stale or 'other keys'}): run `pack --task square` and train again, or pass the pack's "
+            "--workdir."
+        )
+    policy.inverse.load_state_dict({**state, **{k: own[k] for k in fitted}})  # fp32 statistics kept
+    with tempfile.TemporaryDirectory(dir=out.parent if out.parent.exists() else None) as tmp:
+        policy.save_pretrained(Path(tmp) / "joint")
+        rebase(Path(tmp) / "joint", base, out, overwrite=True)
+
+
+def evaluate_square(
+    weights: Path, source: Path, work: Path, cells: list[str], eval_batch: int | None = None
+) -> None:
+    """The Square gpu row: the base (`weights/base`) and the inverse policy (`weights/inverse`) trained on
+    the GPU, assembled in `work` (`assemble_checkpoint`, `assemble_joint`) and evaluated with the `cpu` row's
+    protocol (the Square task's budgets, 100 episodes per cell, seeds 100000+i; resumable); writes
+    `benchmarks/results/square_gpu.json` and RESULTS.md's "Square (gpu)" section once all four cells exist."""
+    from ocr_pipeline import diagnosis, diagnosis_text
+    from results_md import update_section
+    from summary import write as write_summary
+
+    from lerobot_ocr.eval_report import format_table
+    from lerobot_ocr.pipeline import EVAL_SEED, SQUARE, Chain, Stages, chain_cells, evaluate_cells
+
+    p = dict(SQUARE.profiles["cpu"])
+    if eval_batch:  # episode i has seed EVAL_SEED + i whatever the batch
+        p["eval_batch"] = eval_batch
+    stage = Stages(work)
+    base = work / "base" / "checkpoints" / "last" / "pretrained_model"
+    joint = work / "ocr" / "checkpoints" / "last" / "pretrained_model"
+    placeholder = work / "placeholder" / "ocr" / "checkpoints" / "last" / "pretrained_model"
+    if not placeholder.is_dir():
+        raise SystemExit(f"{placeholder} is missing: run `pack --task square --workdir {work}` first.")
+    logs = {
+        part: _same_weights(weights / part, work / f"train_log_{part}.json") for part in ("base", "inverse")
+    }
+
+    def assemble():
+        assemble_checkpoint(weights / "base", base, source / "base_data", "local/square_base")
+        joint.parent.mkdir(parents=True, exist_ok=True)
+        assemble_joint(weights / "inverse", placeholder, base, joint)
+        for part, log in logs.items():
+            (work / f"train_log_{part}.json").write_text(json.dumps(log, indent=1))
+        return {part: log["steps_done"] for part, log in logs.items()}
+
+    stage("assemble", assemble)
+    results = evaluate_cells(stage, SQUARE, chain_cells(base, joint, cells), p)
+    table = format_table(results)
+    print("\n" + table)
+    if set(results) != {"base_id", "base_ood", "joint_id", "joint_ood"}:
+        return  # the row is published once all four cells exist
+    eval_dirs = {name: work / f"eval_{name}" for name in results}
+    d = diagnosis(Chain(results, eval_dirs, base, joint, source / "converted", stage.times))
+    kwargs = logs["inverse"]["inverse_kwargs"]
+    settings = {
+        **p,
+        "base_dims": str(list(RECIPE["down_dims"])),
+        "base_steps": logs["base"]["steps_done"],
+        "base_batch": RECIPE["batch"],
+        "ocr_dims": str(list(kwargs["down_dims"])),
+        "ocr_steps": logs["inverse"]["steps_done"],
+        "ocr_batch": RECIPE["batch"],
+    }
+    payload = {
+        "benchmark": "square_ocr",
+        "profile": "gpu",
+        "settings": settings,
+        "recipe": RECIPE,
+        "training": {
+            part: {k: log[k] for k in ("steps_done", "train_seconds", "gpu", "torch", "items")}
+            for part, log in logs.items()
+        },
+        **results,
+        "handback_diagnosis": d,
+        "stage_seconds": stage.times,
+        "machine": f"eval: {platform.machine()}, {os.cpu_count()} cores, python {platform.python_version()}",
+        "date": dt.date.today().isoformat(),
+    }
+    (HERE / "results" / "square_gpu.json").write_text(json.dumps(payload, indent=2) + "\n")
+    write_summary()
+    gpu = logs["base"]["gpu"]
+    minutes = max(log["train_seconds"] for log in logs.values()) / 60
+    batch_flag = f" --eval-batch {eval_batch}" if eval_batch else ""
+    seconds = logs["base"].get("seconds_asked") or "…"
+    update_section(
+        "Square (gpu)",
+        f"""
+The `cpu` row's {p["demos"]} scripted ID demos and low-dim features; both networks trained with Diffusion
+Policy's low-dim recipe on one {gpu}, side by side in {minutes:.1f} min: the base U-Net
+{list(RECIPE["down_dims"])} ({logs["base"]["steps_done"]} steps), the inverse policy U-Net
+{list(kwargs["down_dims"])} ({logs["inverse"]["steps_done"]} steps; configs/policy/ocr_joint_square.json
+otherwise), batch {RECIPE["batch"]}, AdamW 1e-4, cosine with 500 warm-up steps, EMA weights (power 0.75).
+{p["episodes"]} episodes per cell, env seeds {EVAL_SEED}+i, evaluated on CPU; {SQUARE.episode_length}-step
+episodes ({SQUARE.joint_episode_length} for ocr_joint), success counted within {SQUARE.step_budget} steps
+(strict) and within {SQUARE.decision_budget} calls of the reference's joint budget in env time (a recovery
+decision counts its steps / {SQUARE.recovery_call_steps}).
+{SQUARE.paper}
+
+{table}
+{diagnosis_text(d)}
+Machine: {payload["machine"]}. Date: {payload["date"]}.
+
+Commands: `.venv/bin/python benchmarks/gpu_base.py pack --task square --source {source} --workdir {work}`;
+on the GPU machine `python3 benchmarks/gpu_base.py train --part base --seconds {seconds} --out $OUT/base`
+beside `... train --part inverse --seconds {seconds} --out $OUT/inverse`; here
+`.venv/bin/python benchmarks/gpu_base.py evaluate --task square --weights {weights} --source {source}
+--workdir {work}{batch_flag}`.
 """,
     )
 
@@ -622,13 +947,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     a = sub.add_parser("pack", help="here: items, config and LeRobot's packages -> .gpu/")
-    a.add_argument("--workdir", type=Path, default=REPO / "outputs" / "pusht_ocr_cpu")
     b = sub.add_parser("train", help="on the GPU machine")
     b.add_argument("--seconds", type=float, default=420)
     b.add_argument(
         "--steps", type=int, default=None, help="exactly this many steps; --seconds is then ignored"
     )
     b.add_argument("--out", type=Path, default=Path(os.environ.get("OUT", "outputs/gpu_base")))
+    b.add_argument("--seed", type=int, default=None, help="default: the recipe's")
+    b.add_argument("--part", choices=("base", "inverse"), default="base", help="inverse: Square's pack only")
     c = sub.add_parser("evaluate", help="here: checkpoint, cells, results")
     d = sub.add_parser("continual-pack", help="here: the gpu row's joint policy collects; merge; pack")
     e = sub.add_parser(
@@ -638,15 +964,17 @@ def main() -> None:
         sub_parser.add_argument(
             "--weights", type=Path, required=True, help="the train command's output folder"
         )
+    for sub_parser in (a, c):
+        sub_parser.add_argument("--task", choices=("pusht", "square"), default="pusht")
     for sub_parser, help_ in (
-        (c, "a finished chain: its base_data and inverse policy"),
+        (a, "square: the cpu chain whose data stages run here (Push-T packs --workdir's base_data)"),
+        (c, "a finished chain: its base_data and inverse policy (square: its data)"),
         (d, "the gpu base's chain"),
     ):
-        sub_parser.add_argument("--source", type=Path, default=REPO / "outputs" / "pusht_ocr_cpu", help=help_)
+        sub_parser.add_argument("--source", type=Path, default=None, help=help_)
+    for sub_parser in (a, c, d, e):
+        sub_parser.add_argument("--workdir", type=Path, default=None, help="the gpu row")
     for sub_parser in (c, d, e):
-        sub_parser.add_argument(
-            "--workdir", type=Path, default=REPO / "outputs" / "pusht_ocr_gpu", help="the gpu row"
-        )
         sub_parser.add_argument(
             "--eval-batch", type=int, default=None, help="envs per batch (default: the cpu profile's)"
         )
@@ -655,17 +983,25 @@ def main() -> None:
         "--collect", type=int, default=None, help="successful episodes (default: continual.py's cpu)"
     )
     args = parser.parse_args()
-    if args.command == "pack":
-        pack(args.workdir / "base_data")
+    task = getattr(args, "task", "pusht")
+    source = getattr(args, "source", None) or REPO / "outputs" / f"{task}_ocr_cpu"
+    workdir = getattr(args, "workdir", None) or REPO / "outputs" / f"{task}_ocr_gpu"
+    if args.command == "pack" and task == "square":
+        pack_square(source, workdir)
+    elif args.command == "pack":  # Push-T: the base's items only (--workdir: the cpu chain, as before)
+        pack((args.workdir or REPO / "outputs" / "pusht_ocr_cpu") / "base_data")
     elif args.command == "continual-pack":
-        continual_pack(args.workdir, args.source, args.collect, args.eval_batch)
+        continual_pack(workdir, source, args.collect, args.eval_batch)
     elif args.command == "continual-evaluate":
-        continual_evaluate(args.weights, args.workdir, args.eval_batch)
+        continual_evaluate(args.weights, workdir, args.eval_batch)
     elif args.command == "train":
         args.out.mkdir(parents=True, exist_ok=True)
-        train(PACK if (PACK / "items.pt").exists() else Path(".gpu"), args.seconds, args.out, args.steps)
+        pack_dir = PACK if (PACK / "source.json").exists() else Path(".gpu")
+        train(pack_dir, args.seconds, args.out, args.steps, args.part, args.seed)
+    elif task == "square":
+        evaluate_square(args.weights, source, workdir, args.cells, args.eval_batch)
     else:
-        evaluate(args.weights, args.source, args.workdir, args.cells, args.eval_batch)
+        evaluate(args.weights, source, workdir, args.cells, args.eval_batch)
 
 
 if __name__ == "__main__":

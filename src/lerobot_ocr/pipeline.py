@@ -357,94 +357,119 @@ def evaluate_cells(
     return results
 
 
-def run_chain(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> Chain:
-    """Run (or resume) the chain for profile settings `p` in `work`; evaluate `p["cells"]` (default all).
+class ChainData(NamedTuple):
+    """What `chain_data` produced: the demos, the base's training data and the converted dataset."""
+
+    demos: Path
+    base_data: Path  # the demos without the features the base does not read
+    converted: Path  # base_data + object pose and keypoints: the inverse policy's training data
+    base_repo: str
+    ocr_repo: str
+
+
+def chain_data(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> ChainData:
+    """Run (or resume) the chain's data stages in `work`: `demos`, `base_data`, `convert` (none of them
+    reads a trained policy, so a chain whose networks train elsewhere, `benchmarks/gpu_base.py`, shares them).
 
     Raises:
         RuntimeError: a stage failed (its log's tail is in the message; a re-run resumes at that stage).
     """
     work.mkdir(parents=True, exist_ok=True)
     logs, stage = work / "logs", Stages(work)
-    demos, base_data, converted = work / "demos", work / "base_data", work / "converted"
-    demos_repo, base_repo, ocr_repo = (
-        f"local/{task.name}_demos",
+    data = ChainData(
+        work / "demos",
+        work / "base_data",
+        work / "converted",
         f"local/{task.name}_base",
         f"local/{task.name}_ocr",
     )
-    stage("demos", lambda: run(task.generate_args(p, demos, list(env_args)), logs / "demos.log"))
+    demos_repo = f"local/{task.name}_demos"
+    stage("demos", lambda: run(task.generate_args(p, data.demos, list(env_args)), logs / "demos.log"))
 
     def make_base_data():
         from lerobot.datasets import LeRobotDataset
         from lerobot.datasets.dataset_tools import remove_feature
 
-        ds = LeRobotDataset(demos_repo, root=demos)
+        ds = LeRobotDataset(demos_repo, root=data.demos)
         if p["base"] == "lowdim":
             drop = [k for k in ds.meta.features if k.startswith(task.image_feature)]
         else:
             drop = ["observation.environment_state"]
-        shutil.rmtree(base_data, ignore_errors=True)
+        shutil.rmtree(data.base_data, ignore_errors=True)
         if drop:
-            remove_feature(ds, drop, output_dir=base_data, repo_id=base_repo)
+            remove_feature(ds, drop, output_dir=data.base_data, repo_id=data.base_repo)
         else:
-            shutil.copytree(demos, base_data)
+            shutil.copytree(data.demos, data.base_data)
         return {"dropped": drop}
 
     stage("base_data", make_base_data)
-    base_out = work / "base"
-
-    def train_base():
-        args = base_train_args(p, base_data, base_out, task, base_repo)
-        return train(args, base_out, logs / "base_train.log")
-
-    stage("base_train", train_base)
-    base_ckpt = base_out / "checkpoints" / "last" / "pretrained_model"
 
     def convert():
         from lerobot_ocr.convert import convert_dataset
 
         convert_dataset(
-            base_repo,
-            converted,
+            data.base_repo,
+            data.converted,
             task.object_spec,
             "feature:observation.object_pose",
-            root=base_data,
-            output_repo_id=ocr_repo,
+            root=data.base_data,
+            output_repo_id=data.ocr_repo,
             overwrite=True,
             pose_rotation=task.pose_rotation,
         )
 
     stage("convert", convert)
+    return data
+
+
+def ocr_train_args(task: Task, p: dict, data: ChainData, base_ckpt: Path, out: Path) -> list[str]:
+    """The ocr_joint policy's training command for profile settings `p`: the task's shipped config on the
+    converted dataset, wrapping `base_ckpt`, writing to `out`."""
+    return [
+        *trainer(p),
+        f"--config_path={CONFIGS / task.policy_config}",
+        f"--dataset.repo_id={data.ocr_repo}",
+        f"--dataset.root={data.converted}",
+        f"--policy.base_path={base_ckpt}",
+        f"--policy.device={p['device']}",
+        f"--policy.down_dims={p['ocr_dims']}",
+        f"--steps={p['ocr_steps']}",
+        f"--batch_size={p['ocr_batch']}",
+        "--num_workers=0",
+        f"--save_freq={save_freq(p['ocr_steps'])}",
+        "--log_freq=500",
+        "--seed=1000",
+        f"--output_dir={out}",
+    ]
+
+
+def run_chain(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> Chain:
+    """Run (or resume) the chain for profile settings `p` in `work`; evaluate `p["cells"]` (default all).
+
+    Raises:
+        RuntimeError: a stage failed (its log's tail is in the message; a re-run resumes at that stage).
+    """
+    data = chain_data(task, p, work, env_args)
+    logs, stage = work / "logs", Stages(work)
+    base_out = work / "base"
+
+    def train_base():
+        args = base_train_args(p, data.base_data, base_out, task, data.base_repo)
+        return train(args, base_out, logs / "base_train.log")
+
+    stage("base_train", train_base)
+    base_ckpt = base_out / "checkpoints" / "last" / "pretrained_model"
     ocr_out = work / "ocr"
-
-    def train_ocr():
-        return train(
-            [
-                *trainer(p),
-                f"--config_path={CONFIGS / task.policy_config}",
-                f"--dataset.repo_id={ocr_repo}",
-                f"--dataset.root={converted}",
-                f"--policy.base_path={base_ckpt}",
-                f"--policy.device={p['device']}",
-                f"--policy.down_dims={p['ocr_dims']}",
-                f"--steps={p['ocr_steps']}",
-                f"--batch_size={p['ocr_batch']}",
-                "--num_workers=0",
-                f"--save_freq={save_freq(p['ocr_steps'])}",
-                "--log_freq=500",
-                "--seed=1000",
-                f"--output_dir={ocr_out}",
-            ],
-            ocr_out,
-            logs / "ocr_train.log",
-        )
-
-    stage("ocr_train", train_ocr)
+    stage(
+        "ocr_train",
+        lambda: train(ocr_train_args(task, p, data, base_ckpt, ocr_out), ocr_out, logs / "ocr_train.log"),
+    )
     ocr_ckpt = ocr_out / "checkpoints" / "last" / "pretrained_model"
 
     cells = chain_cells(base_ckpt, ocr_ckpt, (name for name in CELLS if name in p.get("cells", CELLS)))
     results = evaluate_cells(stage, task, cells, p, env_args)
     eval_dirs = {name: work / f"eval_{name}" for name in cells}
-    return Chain(results, eval_dirs, base_ckpt, ocr_ckpt, converted, stage.times)
+    return Chain(results, eval_dirs, base_ckpt, ocr_ckpt, data.converted, stage.times)
 
 
 def success_chart(title: str, results: dict, path: Path) -> Path:

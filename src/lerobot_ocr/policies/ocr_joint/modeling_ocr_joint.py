@@ -64,6 +64,34 @@ MODEL_FILE = "model.safetensors"
 KEYPOINTS_FILE = "object_keypoints.json"
 
 
+def inverse_policy_kwargs(
+    config: OcrJointConfig, n_keypoints: int, dim: int, state_dim: int, action_dim: int
+) -> dict:
+    """`KeypointInversePolicy`'s arguments for an ocr_joint `config` and these sizes (K keypoints in D
+    dimensions, S state entries, A action entries): plain values, so the network can be rebuilt without
+    the config (`benchmarks/gpu_base.py` trains it where only torch and LeRobot are installed)."""
+    return {
+        "n_keypoints": n_keypoints,
+        "dim": dim,
+        "state_dim": state_dim,
+        "action_dim": action_dim,
+        "horizon": config.horizon,
+        "state_frame": config.state_frame,
+        "action_frame": config.action_frame,
+        "down_dims": config.down_dims,
+        "kernel_size": config.kernel_size,
+        "n_groups": config.n_groups,
+        "diffusion_step_embed_dim": config.diffusion_step_embed_dim,
+        "use_film_scale_modulation": config.use_film_scale_modulation,
+        "noise_scheduler_type": config.noise_scheduler_type,
+        "num_train_timesteps": config.num_train_timesteps,
+        "num_inference_steps": config.num_inference_steps,
+        "beta_schedule": config.beta_schedule,
+        "prediction_type": config.prediction_type,
+        "clip_sample": config.clip_sample,
+    }
+
+
 class Observed(NamedTuple):
     """One step's observation as OCR sees it (B rows, world frame) and the manifold's verdict on it."""
 
@@ -137,26 +165,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             if config.handback_components
             else None
         )
-        self.inverse = KeypointInversePolicy(
-            k,
-            d,
-            state_dim,
-            action_dim,
-            horizon=config.horizon,
-            state_frame=config.state_frame,
-            action_frame=config.action_frame,
-            down_dims=config.down_dims,
-            kernel_size=config.kernel_size,
-            n_groups=config.n_groups,
-            diffusion_step_embed_dim=config.diffusion_step_embed_dim,
-            use_film_scale_modulation=config.use_film_scale_modulation,
-            noise_scheduler_type=config.noise_scheduler_type,
-            num_train_timesteps=config.num_train_timesteps,
-            num_inference_steps=config.num_inference_steps,
-            beta_schedule=config.beta_schedule,
-            prediction_type=config.prediction_type,
-            clip_sample=config.clip_sample,
-        )
+        self.inverse = KeypointInversePolicy(**inverse_policy_kwargs(config, k, d, state_dim, action_dim))
         self.planner = RecoveryPlanner(
             horizon=config.horizon,
             step_size=config.step_size,

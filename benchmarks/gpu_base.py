@@ -191,6 +191,30 @@ def _no_bytecode(info):
     return None if "__pycache__" in info.name or info.name.endswith(".pyc") else info
 
 
+def inverse_pack(policy) -> dict:
+    """What `train --part inverse` needs of an ocr_joint `policy` built with its training table
+    (lerobot-train's `make_policy(cfg, ds_meta=…)`, or `_load_training_table`): the network's arguments,
+    its fitted normalisation buffers and the table (world keypoints (N, K, D), robot state (N, S),
+    object frames (N, D+1, D+1), actions (N, A), each frame's episode end (N,))."""
+    from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import inverse_policy_kwargs
+
+    k, d = policy.object_keypoints_.shape
+    kwargs = inverse_policy_kwargs(
+        policy.config, k, d, policy._tbl_state.shape[-1], policy._tbl_action.shape[-1]
+    )
+    return {
+        "kwargs": kwargs,
+        "fitted": {k: v for k, v in policy.inverse.state_dict().items() if not k.startswith("diffusion.")},
+        "table": {
+            "keypoints": policy._tbl_keypoints,
+            "state": policy._tbl_state,
+            "frames": policy._tbl_frames,
+            "action": policy._tbl_action,
+            "last": policy._tbl_last,
+        },
+    }
+
+
 def pack_square(source: Path, work: Path, out: Path = PACK) -> None:
     """Square's pack: the `cpu` chain's data stages in `source` (resumable), the base's items, an ocr_joint
     checkpoint trained one step by the shipped command in `work/placeholder` (manifold, threshold and the
@@ -200,7 +224,7 @@ def pack_square(source: Path, work: Path, out: Path = PACK) -> None:
     import torch
 
     from lerobot_ocr.pipeline import SQUARE, chain_data, ocr_train_args, run
-    from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy, inverse_policy_kwargs
+    from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
 
     p = SQUARE.profiles["cpu"]
     data = chain_data(SQUARE, p, source)
@@ -215,22 +239,7 @@ def pack_square(source: Path, work: Path, out: Path = PACK) -> None:
     joint = placeholder / "ocr" / "checkpoints" / "last" / "pretrained_model"
     policy = OcrJointPolicy.from_pretrained(joint)
     policy._load_training_table(data.converted)
-    k, d = policy.object_keypoints_.shape
-    kwargs = inverse_policy_kwargs(
-        policy.config, k, d, policy._tbl_state.shape[-1], policy._tbl_action.shape[-1]
-    )
-    table = {
-        "keypoints": policy._tbl_keypoints,
-        "state": policy._tbl_state,
-        "frames": policy._tbl_frames,
-        "action": policy._tbl_action,
-        "last": policy._tbl_last,
-    }
-    fitted = {k: v for k, v in policy.inverse.state_dict().items() if not k.startswith("diffusion.")}
-    torch.save(
-        {"kwargs": kwargs, "fitted": fitted, "table": table, "joint": str(joint.resolve())},
-        out / "inverse.pt",
-    )
+    torch.save({**inverse_pack(policy), "joint": str(joint.resolve())}, out / "inverse.pt")
     source_json = json.loads((out / "source.json").read_text())
     source_json["inverse"] = {"data": str(data.converted.resolve()), "windows": len(policy._tbl_index)}
     (out / "source.json").write_text(json.dumps(source_json))
@@ -338,6 +347,7 @@ def train(
     (with the inverse policy's arguments): at most 5 files, as the GPU machine returns 8. `seed` (default
     the recipe's) seeds the initial weights, the noise and the batch order."""
     seed = RECIPE["seed"] if seed is None else seed
+    out.mkdir(parents=True, exist_ok=True)
     t0 = time.time()
     _import_lerobot(pack_dir)
     import torch
@@ -995,7 +1005,6 @@ def main() -> None:
     elif args.command == "continual-evaluate":
         continual_evaluate(args.weights, workdir, args.eval_batch)
     elif args.command == "train":
-        args.out.mkdir(parents=True, exist_ok=True)
         pack_dir = PACK if (PACK / "source.json").exists() else Path(".gpu")
         train(pack_dir, args.seconds, args.out, args.steps, args.part, args.seed)
     elif task == "square":

@@ -744,29 +744,34 @@ def evaluate_square(
     minutes = max(log["train_seconds"] for log in logs.values()) / 60
     batch_flag = f" --eval-batch {eval_batch}" if eval_batch else ""
     seconds = logs["base"].get("seconds_asked") or "…"
+    rel = {
+        k: os.path.relpath(v, REPO) for k, v in {"source": source, "work": work, "weights": weights}.items()
+    }
     update_section(
         "Square (gpu)",
         f"""
 The `cpu` row's {p["demos"]} scripted ID demos and low-dim features; both networks trained with Diffusion
-Policy's low-dim recipe on one {gpu}, side by side in {minutes:.1f} min: the base U-Net
-{list(RECIPE["down_dims"])} ({logs["base"]["steps_done"]} steps), the inverse policy U-Net
-{list(kwargs["down_dims"])} ({logs["inverse"]["steps_done"]} steps; configs/policy/ocr_joint_square.json
-otherwise), batch {RECIPE["batch"]}, AdamW 1e-4, cosine with 500 warm-up steps, EMA weights (power 0.75).
-{p["episodes"]} episodes per cell, env seeds {EVAL_SEED}+i, evaluated on CPU; {SQUARE.episode_length}-step
-episodes ({SQUARE.joint_episode_length} for ocr_joint), success counted within {SQUARE.step_budget} steps
-(strict) and within {SQUARE.decision_budget} calls of the reference's joint budget in env time (a recovery
-decision counts its steps / {SQUARE.recovery_call_steps}).
+Policy's low-dim recipe on one {gpu}, side by side in {minutes:.1f} min (batch {RECIPE["batch"]}, AdamW
+1e-4, cosine with 500 warm-up steps, EMA weights of power 0.75, seed {logs["base"].get("seed", 1000)}):
+the base U-Net {list(RECIPE["down_dims"])}, {logs["base"]["steps_done"]} steps; the inverse policy U-Net
+{list(kwargs["down_dims"])}, {logs["inverse"]["steps_done"]} steps (`configs/policy/ocr_joint_square.json`
+otherwise). {p["episodes"]} episodes per cell, env seeds {EVAL_SEED}+i, evaluated on CPU;
+{SQUARE.episode_length}-step episodes ({SQUARE.joint_episode_length} for ocr_joint), success within
+{SQUARE.step_budget} steps (strict) and within {SQUARE.decision_budget} calls of the reference's joint budget
+in env time (a recovery decision counts its steps / {SQUARE.recovery_call_steps}).
 {SQUARE.paper}
 
 {table}
-{diagnosis_text(d)}
+
+{diagnosis_text(d).strip()}
+
 Machine: {payload["machine"]}. Date: {payload["date"]}.
 
-Commands: `.venv/bin/python benchmarks/gpu_base.py pack --task square --source {source} --workdir {work}`;
-on the GPU machine `python3 benchmarks/gpu_base.py train --part base --seconds {seconds} --out $OUT/base`
-beside `... train --part inverse --seconds {seconds} --out $OUT/inverse`; here
-`.venv/bin/python benchmarks/gpu_base.py evaluate --task square --weights {weights} --source {source}
---workdir {work}{batch_flag}`.
+Commands: `.venv/bin/python benchmarks/gpu_base.py pack --task square --source {rel["source"]} --workdir
+{rel["work"]}`; on the GPU machine `python3 benchmarks/gpu_base.py train --part base --seconds {seconds}
+--out $OUT/base` beside `... train --part inverse --seconds {seconds} --out $OUT/inverse`; here
+`.venv/bin/python benchmarks/gpu_base.py evaluate --task square --weights {rel["weights"]} --source
+{rel["source"]} --workdir {rel["work"]}{batch_flag}`.
 """,
     )
 

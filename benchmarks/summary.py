@@ -155,7 +155,8 @@ def body() -> str:
         "efficiency = joint OOD ÷ base ID, both within the reference budget (the paper's 0.93 / 0.90 ≈ "
         "1.03 divides by its 400-step base). The paper's Push-T base is an image diffusion policy trained "
         "on a GPU; ours are low-dim diffusion policies, trained on 2 CPU cores (`cpu`) or with Diffusion "
-        "Policy's recipe on one GPU (`gpu`, evaluated on CPU, `benchmarks/gpu_base.py`).\n\n"
+        "Policy's recipe on one GPU (`gpu`, evaluated on CPU, `benchmarks/gpu_base.py`; Push-T's `gpu` row "
+        "trains its base there, Square's both the base and the inverse policy).\n\n"
         + table()
         + "\n\nContinual learning (the paper's Table III, `benchmarks/continual.py`): the base fine-tuned "
         "(`gpu`: retrained from scratch) on the demos plus the episodes the joint policy collected from OOD "

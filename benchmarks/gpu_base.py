@@ -558,8 +558,7 @@ def evaluate(
     from results_md import update_section
     from summary import write as write_summary
 
-    from lerobot_ocr.eval_report import format_table
-    from lerobot_ocr.pipeline import BIN, EVAL_SEED, PUSHT, Stages, chain_cells, evaluate_cells, run
+    from lerobot_ocr.pipeline import BIN, EVAL_SEED, PUSHT, Stages, run
 
     p = _cpu_profile(eval_batch)
     stage = Stages(work)
@@ -584,11 +583,8 @@ def evaluate(
         )
         return {"steps": train_log["steps_done"], "inverse_policy_from": str(source_joint)}
 
-    stage("assemble", assemble)
-    results = evaluate_cells(stage, PUSHT, chain_cells(base, joint, cells), p)
-    table = format_table(results)
-    print("\n" + table)
-    if set(results) != {"base_id", "base_ood", "joint_id", "joint_ood"}:
+    results, table = _assembled_cells(stage, assemble, PUSHT, base, joint, cells, p)
+    if results is None:
         return  # the row is published once all four cells exist
     source_train = json.loads(
         (source / "ocr" / "checkpoints" / "last" / "pretrained_model" / "train_config.json").read_text()
@@ -681,8 +677,7 @@ def evaluate_square(
     from results_md import update_section
     from summary import write as write_summary
 
-    from lerobot_ocr.eval_report import format_table
-    from lerobot_ocr.pipeline import EVAL_SEED, SQUARE, Chain, Stages, chain_cells, evaluate_cells
+    from lerobot_ocr.pipeline import EVAL_SEED, SQUARE, Chain, Stages
 
     p = dict(SQUARE.profiles["cpu"])
     if eval_batch:  # episode i has seed EVAL_SEED + i whatever the batch
@@ -705,11 +700,8 @@ def evaluate_square(
             (work / f"train_log_{part}.json").write_text(json.dumps(log, indent=1))
         return {part: log["steps_done"] for part, log in logs.items()}
 
-    stage("assemble", assemble)
-    results = evaluate_cells(stage, SQUARE, chain_cells(base, joint, cells), p)
-    table = format_table(results)
-    print("\n" + table)
-    if set(results) != {"base_id", "base_ood", "joint_id", "joint_ood"}:
+    results, table = _assembled_cells(stage, assemble, SQUARE, base, joint, cells, p)
+    if results is None:
         return  # the row is published once all four cells exist
     eval_dirs = {name: work / f"eval_{name}" for name in results}
     d = diagnosis(Chain(results, eval_dirs, base, joint, source / "converted", stage.times))
@@ -774,6 +766,19 @@ Commands: `.venv/bin/python benchmarks/gpu_base.py pack --task square --source {
 {rel["source"]} --workdir {rel["work"]}{batch_flag}`.
 """,
     )
+
+
+def _assembled_cells(stage, assemble, task, base: Path, joint: Path, cells: list[str], p: dict):
+    """The `assemble` stage, then the cells (resumable), their table printed; (results, table), or
+    (None, table) until all four cells exist."""
+    from lerobot_ocr.eval_report import format_table
+    from lerobot_ocr.pipeline import CELLS, chain_cells, evaluate_cells
+
+    stage("assemble", assemble)
+    results = evaluate_cells(stage, task, chain_cells(base, joint, cells), p)
+    table = format_table(results)
+    print("\n" + table)
+    return (results if set(results) == set(CELLS) else None), table
 
 
 def _same_weights(weights: Path, assembled: Path) -> dict:

@@ -60,7 +60,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
-# results_md, continual and lerobot_ocr, imported lazily (the GPU machine needs none of them)
+# results_md, continual and lerobot_ocr, imported lazily (the GPU machine needs only lerobot_ocr's
+# inverse_policy and dataset_columns, for `train --part inverse`: torch, numpy and pandas are there)
 sys.path[:0] = [str(HERE), str(REPO / "src")]
 PACK = REPO / ".gpu"
 # LeRobot's import chain on the GPU image lacks these (the image has torch, numpy, huggingface_hub, …).
@@ -311,6 +312,8 @@ def _inverse_part(pack_dir: Path, device: str):
     from lerobot_ocr.dataset_columns import window_positions
     from lerobot_ocr.inverse_policy import KeypointInversePolicy
 
+    if not (pack_dir / "inverse.pt").is_file():
+        raise SystemExit(f"{pack_dir} holds no inverse.pt: make the pack with `pack --task square`.")
     packed = torch.load(pack_dir / "inverse.pt")
     table = {k: v.to(device) for k, v in packed["table"].items()}
     horizon = packed["kwargs"]["horizon"]
@@ -344,7 +347,8 @@ def train(
     """Train the base (`part` "base") or Square's inverse policy ("inverse") for about `seconds` on the GPU
     (or exactly `steps` steps); write to `out` the base's config.json, the EMA weights as fp16 shards
     `ema_fp16_<i>.safetensors` (refreshed every minute, so a cut run still returns them) and train_log.json
-    (with the inverse policy's arguments): at most 5 files, as the GPU machine returns 8. `seed` (default
+    (with the inverse policy's arguments): 5 files for the base, 3 for the inverse policy (its 26 MiB in
+    two 15 MiB shards), 8 together, what the GPU machine returns. `seed` (default
     the recipe's) seeds the initial weights, the noise and the batch order."""
     seed = RECIPE["seed"] if seed is None else seed
     out.mkdir(parents=True, exist_ok=True)
@@ -654,10 +658,11 @@ def assemble_joint(inverse_weights: Path, placeholder: Path, base: Path, out: Pa
             own[k].to(torch.float16).float() if own[k].is_floating_point() else own[k], state[k]
         )
     ]
-    if stale or set(state) != set(own):
+    shapes = {k: tuple(v.shape) for k, v in own.items()} == {k: tuple(v.shape) for k, v in state.items()}
+    if stale or not shapes:
         raise SystemExit(
             f"{inverse_weights} was not trained on the normalisation of {placeholder} "
-            f"({stale or 'other keys'}): run `pack --task square` and train again, or pass the pack's "
+            f"({stale or 'another network'}): run `pack --task square` and train again, or pass the pack's "
             "--workdir."
         )
     policy.inverse.load_state_dict({**state, **{k: own[k] for k in fitted}})  # fp32 statistics kept
@@ -993,7 +998,9 @@ def main() -> None:
     ):
         sub_parser.add_argument("--source", type=Path, default=None, help=help_)
     for sub_parser in (a, c, d, e):
-        sub_parser.add_argument("--workdir", type=Path, default=None, help="the gpu row")
+        sub_parser.add_argument(
+            "--workdir", type=Path, default=None, help="the gpu row (Push-T `pack`: the cpu chain it packs)"
+        )
     for sub_parser in (c, d, e):
         sub_parser.add_argument(
             "--eval-batch", type=int, default=None, help="envs per batch (default: the cpu profile's)"

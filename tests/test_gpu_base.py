@@ -57,7 +57,7 @@ def test_trained_weights_go_back_into_the_packed_checkpoint(packed, diffusion_ba
     trained = gpu_base.load_shards(weights)
     name = next(k for k in trained if k.startswith("diffusion.") and trained[k].ndim > 1)
     assert torch.equal(assembled[name], trained[name])  # the EMA weights (fp16 -> fp32)
-    assert not torch.equal(assembled[name], joint.inverse.state_dict()[name])  # not the packed ones
+    assert not torch.equal(assembled[name], joint.inverse.state_dict()[name])  # not the placeholder's
     assert torch.equal(assembled["keypoint_mean_"], joint.inverse.keypoint_mean_)  # fp32 statistics kept
 
     from safetensors.torch import load_file, save_file

@@ -113,3 +113,15 @@ def test_square_cells_run_the_references_protocol_per_policy(tmp_path):
     pusht = [flags(ocr_pipeline.PUSHT, kind) for kind in policies]
     assert [f["--env.episode_length"] for f in pusht] == ["960", "960"]
     assert not any("--ocr.recovery_call_steps" in f for f in pusht)
+
+
+def test_chain_data_stages_count_in_the_chains_stage_times(tmp_path):
+    """The data stages run in the chain's own `Stages` (their times are the chain's: the published totals)."""
+    from lerobot_ocr.pipeline import SQUARE, Stages, chain_data
+
+    for name, seconds in (("demos", 400.0), ("base_data", 2.0), ("convert", 5.0)):  # finished earlier
+        (tmp_path / f"{name}.json").write_text(json.dumps({"result": None, "seconds": seconds}))
+    stage = Stages(tmp_path)
+    data = chain_data(SQUARE, SQUARE.profiles["cpu"], tmp_path, stage=stage)
+    assert stage.times == {"demos": 400.0, "base_data": 2.0, "convert": 5.0}
+    assert (data.converted, data.ocr_repo) == (tmp_path / "converted", "local/square_ocr")

@@ -367,15 +367,18 @@ class ChainData(NamedTuple):
     ocr_repo: str
 
 
-def chain_data(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> ChainData:
+def chain_data(
+    task: Task, p: dict, work: Path, env_args: list[str] = (), stage: Stages | None = None
+) -> ChainData:
     """Run (or resume) the chain's data stages in `work`: `demos`, `base_data`, `convert` (none of them
     reads a trained policy, so a chain whose networks train elsewhere, `benchmarks/gpu_base.py`, shares them).
+    `stage`: the chain's `Stages` (their times join the chain's); default a new one on `work`.
 
     Raises:
         RuntimeError: a stage failed (its log's tail is in the message; a re-run resumes at that stage).
     """
     work.mkdir(parents=True, exist_ok=True)
-    logs, stage = work / "logs", Stages(work)
+    logs, stage = work / "logs", stage or Stages(work)
     data = ChainData(
         work / "demos",
         work / "base_data",
@@ -449,8 +452,8 @@ def run_chain(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> Chai
     Raises:
         RuntimeError: a stage failed (its log's tail is in the message; a re-run resumes at that stage).
     """
-    data = chain_data(task, p, work, env_args)
     logs, stage = work / "logs", Stages(work)
+    data = chain_data(task, p, work, env_args, stage)
     base_out = work / "base"
 
     def train_base():

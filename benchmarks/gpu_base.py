@@ -8,8 +8,8 @@ policy there, in two processes side by side.
     .venv/bin/python benchmarks/gpu_base.py evaluate --weights <dir>   # here: checkpoint, 4 cells, JSON
 
     .venv/bin/python benchmarks/gpu_base.py pack --task square         # here: demos, both packs -> .gpu/
-    python3 benchmarks/gpu_base.py train --part base --seconds 390 --out "$OUT/base" &   # GPU machine
-    python3 benchmarks/gpu_base.py train --part inverse --seconds 390 --out "$OUT/inverse" & wait
+    python3 benchmarks/gpu_base.py train --part base --seconds 380 --out "$OUT/base" &   # GPU machine
+    python3 benchmarks/gpu_base.py train --part inverse --seconds 380 --out "$OUT/inverse" & wait
     .venv/bin/python benchmarks/gpu_base.py evaluate --task square --weights <dir>   # here: 4 cells
 
 and the paper's Table III on the Push-T row (after `evaluate`):

@@ -90,11 +90,6 @@ class OcrJointConfig(PreTrainedConfig):
             position actions (`action_frame` "pose:*" or "point"). Default None (off); the shipped
             Square config 0.005 (5 mm): Square joint OOD 0.49 -> 0.645 on 200 paired starts. `select_action`
             only. Beyond the paper (benchmarks/EXPERIMENTS.md, "Carrying a held nut, adopted").
-        hold_on_base: with `carry_tolerance`, a row on the base whose robot holds the object is not sent
-            to recovery, whatever its score: the gripper was last commanded closed and, since the object
-            last kept its offset to the end effector (within `carry_tolerance`), it has moved by more than
-            `carry_tolerance` with it. The demos cross the air between pick and place quickly, so a
-            carried object scores low there. Default False. `select_action` only. Beyond the paper.
         gripper_action_index: the action entry that commands the gripper, read as closed when > 0
             (robosuite's and the Franka robot's -1 open / +1 close). Default -1 (the last).
     Inverse policy: LeRobot's diffusion U-Net (`down_dims`, ...), DDIM with `num_inference_steps`
@@ -137,7 +132,6 @@ class OcrJointConfig(PreTrainedConfig):
     stall_distance: float | None = None
     stall_delay: int = 4
     carry_tolerance: float | None = None
-    hold_on_base: bool = False
     gripper_action_index: int = -1
 
     # Keypoint inverse policy (LeRobot's diffusion U-Net).
@@ -210,11 +204,6 @@ class OcrJointConfig(PreTrainedConfig):
         if self.carry_tolerance is not None and not self.carry_tolerance > 0:
             raise ValueError(
                 f"--policy.carry_tolerance must be > 0 (object units) or None, got {self.carry_tolerance}."
-            )
-        if self.hold_on_base and self.carry_tolerance is None:
-            raise ValueError(
-                "--policy.hold_on_base=true tells a held object by --policy.carry_tolerance: set it "
-                "(e.g. 0.005 for Square) or leave hold_on_base false."
             )
         if self.carry_tolerance is not None and self.ee_position_start is None:
             raise ValueError(

@@ -92,9 +92,6 @@ def inverse_policy_kwargs(
     }
 
 
-HOLD_RELEASE = 4.0  # `hold_on_base`: a held object is let go once its offset drifts by this many tolerances
-
-
 class Observed(NamedTuple):
     """One step's observation as OCR sees it (B rows, world frame) and the manifold's verdict on it."""
 
@@ -389,12 +386,6 @@ class OcrJointPolicy(PreTrainedPolicy):
         # planned (`carry_tolerance`)
         self._chunk_ee: torch.Tensor | None = None
         self._chunk_centre: torch.Tensor | None = None
-        # per row (`hold_on_base`): the robot holds the object, the object's offset to the end effector
-        # and its keypoint centre where it last kept that offset, and the last action's gripper command
-        self._hold: torch.Tensor | None = None
-        self._hold_offset: torch.Tensor | None = None
-        self._hold_centre: torch.Tensor | None = None
-        self._last_gripper: torch.Tensor | None = None
 
     def _archive_stats(self) -> None:
         if getattr(self, "_scores", None):
@@ -404,7 +395,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._decisions: list[
             torch.Tensor
         ] = []  # per step, (B,) bool: the row got a new chunk (base or recovery)
-        self._n_chunks = self._n_handbacks = self._n_shortened = self._n_carried = self._n_kept = 0
+        self._n_chunks = self._n_handbacks = self._n_shortened = self._n_carried = 0
 
     def _start_rows(self, b: int, device: torch.device) -> None:
         """A first step, or a batch of another size or device (a new rollout): all rows start on the base."""
@@ -421,7 +412,6 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._chunk = torch.zeros(b, self.config.n_recovery_action_steps, action_dim, device=device)
         self._chunk_keypoints = self._chunk_pushes = None
         self._chunk_ee = self._chunk_centre = None
-        self._hold = self._hold_offset = self._hold_centre = self._last_gripper = None
         self._unchecked = torch.full(
             (b,), float("nan"), dtype=torch.float64
         )  # the score where none was needed
@@ -581,47 +571,13 @@ class OcrJointPolicy(PreTrainedPolicy):
         held = continuing & closed & (torch.linalg.vector_norm(moved, dim=-1) > tol) & (apart < tol)
         return held.to(idx.device)
 
-    def _holding(self, obs: Observed) -> torch.Tensor:
-        """(B,) bool, updated at every scored step (`hold_on_base`): does the robot hold the object?
-
-        Held: the last action commanded the gripper closed, the keypoint centre keeps its offset to the
-        end effector within `carry_tolerance` (world frame, object units), and since it took that offset
-        it has moved by more than `carry_tolerance`. A row that loses the offset (or opens) starts over
-        from where it is now.
-        """
-        cfg = self.config
-        d = obs.keypoints.shape[-1]
-        start = cfg.ee_position_start
-        centre = obs.keypoints.mean(1)
-        offset = centre - obs.state[:, start : start + d].to(centre)
-        if self._hold is None:
-            self._hold = torch.zeros(len(centre), dtype=torch.bool, device=centre.device)
-            self._hold_offset, self._hold_centre = offset.clone(), centre.clone()
-        closed = (
-            torch.zeros_like(self._hold)
-            if self._last_gripper is None
-            else self._last_gripper.to(centre.device) > 0
-        )
-        tol = cfg.carry_tolerance
-        drift = torch.linalg.vector_norm(offset - self._hold_offset, dim=-1)
-        # a held object may swing in the gripper: it stays held until its offset drifts by HOLD_RELEASE tol
-        keeps = closed & (drift < torch.where(self._hold, HOLD_RELEASE * tol, tol))
-        moved = torch.linalg.vector_norm(centre - self._hold_centre, dim=-1) > tol
-        self._hold = keeps & (self._hold | moved)
-        self._hold_offset = torch.where(keeps[:, None], self._hold_offset, offset)
-        self._hold_centre = torch.where(keeps[:, None], self._hold_centre, centre)
-        return self._hold
-
     def _decide(self, obs: Observed | None, noise: torch.Tensor | None, device) -> torch.Tensor:
         """Switch the rows, plan the chunks they need, hand back; return the (B,) scores (NaN: unchecked)."""
         if obs is None:  # every row on the base, inside its chunk: nothing to decide
             self._new_chunks = None
             return self._unchecked
         score = obs.recovery.score.to(device)
-        stay = self._holding(obs).to(device) if self.config.hold_on_base else None
-        decision = decide(score, float(self.manifold.threshold_), self._switch, obs.joint_ok, stay)
-        if stay is not None:
-            self._n_kept += int((stay & ~self._switch.recovering & (score < self.manifold.threshold_)).sum())
+        decision = decide(score, float(self.manifold.threshold_), self._switch, obs.joint_ok)
         if bool(decision.needs_chunk.any()):
             self._plan_chunks(obs, decision.needs_chunk, noise)
         if bool(decision.hand_back.any()):
@@ -675,8 +631,6 @@ class OcrJointPolicy(PreTrainedPolicy):
         if n_recovering:
             step = self._chunk.shape[1] - 1 - self._switch.actions_left
             action[recovering] = self._chunk[recovering, step[recovering]]
-        if self.config.hold_on_base:
-            self._last_gripper = action[:, self.config.gripper_action_index].clone()
         return action
 
     @torch.no_grad()
@@ -740,7 +694,6 @@ class OcrJointPolicy(PreTrainedPolicy):
             "handbacks": self._n_handbacks,
             "shortened_plans": self._n_shortened,  # recovery plans capped at stall_delay after a stall
             "carried_chunks": self._n_carried,  # recovery chunks that carried a held object (carry_tolerance)
-            "kept_on_base": self._n_kept,  # scored steps a held object stayed on the base (hold_on_base)
             "score": scores,
             "in_recovery": modes,
             "decisions": torch.stack(self._decisions).numpy() if self._decisions else None,

@@ -86,11 +86,7 @@ def needs_check(state: SwitchState, base_queued: int | None) -> bool:
 
 
 def decide(
-    score: torch.Tensor,
-    threshold: float,
-    state: SwitchState,
-    handback_ok: torch.Tensor | None = None,
-    stay: torch.Tensor | None = None,
+    score: torch.Tensor, threshold: float, state: SwitchState, handback_ok: torch.Tensor | None = None
 ) -> Decision:
     """The switch for one step: (B,) scores (NaN = not evaluated), the threshold and the state -> Decision.
 
@@ -98,11 +94,10 @@ def decide(
     else it needs a new chunk; a row on the base enters recovery (and needs a chunk) when score <
     threshold. A NaN score decides nothing: a row on the base stays there, a recovering row goes on
     with its chunk. `handback_ok` ((B,) bool, optional) is a second test a recovering row must also pass
-    to hand back (the joint keypoint density's). `stay` ((B,) bool, optional) keeps a row on the base
-    whatever its score (the robot holds the object: `hold_on_base`).
+    to hand back (the joint keypoint density's); entering is the score's alone.
 
     Raises:
-        ValueError: `score` (or `handback_ok`, `stay`) is not (B,) for the state's B rows, or `score` is NaN
+        ValueError: `score` (or `handback_ok`) is not (B,) for the state's B rows, or `score` is NaN
             for a recovering row whose chunk has run (it has no action left, so it must be scored).
     """
     if score.shape != state.recovering.shape:
@@ -122,12 +117,6 @@ def decide(
             )
         hand_back = hand_back & handback_ok.to(hand_back.device)
     enter = ~state.recovering & (score < threshold)
-    if stay is not None:
-        if stay.shape != state.recovering.shape:
-            raise ValueError(
-                f"stay has shape {tuple(stay.shape)}, expected ({state.batch_size},): one per row."
-            )
-        enter = enter & ~stay.to(enter.device)
     recovering = (state.recovering & ~hand_back) | enter
     return Decision(recovering, enter, hand_back, enter | (chunk_done & ~hand_back))
 

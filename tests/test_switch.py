@@ -8,14 +8,12 @@ from lerobot_ocr.policies.ocr_joint.switch import SwitchState, advance, decide, 
 NAN = float("nan")
 
 
-def run(scores: list[list[float]], chunk_size: int, threshold: float = 0.0, enter_margin: float = 0.0):
+def run(scores: list[list[float]], chunk_size: int, threshold: float = 0.0):
     """Step the switch through (T, B) scores; return per step (modes, actions_left, chunks) as lists."""
     state = SwitchState.start(len(scores[0]))
     trace = []
     for row_scores in scores:
-        decision = decide(
-            torch.tensor(row_scores, dtype=torch.float64), threshold, state, enter_margin=enter_margin
-        )
+        decision = decide(torch.tensor(row_scores, dtype=torch.float64), threshold, state)
         state = advance(state, decision, chunk_size)
         trace.append((decision.recovering.tolist(), state.actions_left.tolist(), state.chunks.tolist()))
     return trace, state
@@ -36,18 +34,6 @@ def test_a_row_still_out_of_distribution_gets_a_new_chunk_and_counts_it():
     assert [t[0][0] for t in trace] == [True, True, True, True, False, True]
     assert [t[2][0] for t in trace] == [1, 1, 2, 2, 2, 1]  # a new recovery counts its chunks from 0
     assert state.handed_back.tolist() == [True]  # it handed back once, at step 4
-
-
-def test_enter_margin_is_a_band_below_the_threshold_for_entering_only():
-    # row 0: far out, then in distribution, then a dip just below the threshold (inside the band), then
-    # out past the band; row 1 on the base dips into the band only
-    scores = [[-5.0, 1.0], [1.0, -0.5], [-0.5, -0.5], [-1.5, 1.0], [-0.5, 1.0]]
-    trace, state = run(scores, chunk_size=1, enter_margin=1.0)
-    assert [t[0][0] for t in trace] == [True, False, False, True, True]  # hands back at 0, re-enters below -1
-    assert not any(t[0][1] for t in trace)
-    plain, _ = run(scores, chunk_size=1)
-    assert [t[0][0] for t in plain] == [True, False, True, True, True]  # without the band the dip re-enters
-    assert plain[1][0][1]
 
 
 def test_a_nan_score_decides_nothing():

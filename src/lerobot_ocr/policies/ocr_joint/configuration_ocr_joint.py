@@ -59,9 +59,6 @@ class OcrJointConfig(PreTrainedConfig):
         calibration_quantile: share of training frames below the calibrated threshold. Default 0.02.
         threshold_margin: nats subtracted from the calibrated threshold (start frames are the rarest
             frames of a demo set; the margin keeps unseen ID starts on the base). Default 2.0.
-        enter_margin: nats below the threshold a row on the base must score to enter recovery; a
-            recovering row still hands back at the threshold (a hysteresis band under it, so a score
-            that dips just below the threshold after a hand-back does not pull the object back). Default 0.
         handback_components: 0 (default, the paper's switch) or M: a recovering row hands back only once
             the joint keypoint density (`lerobot_ocr.joint_density`, M components, calibrated like the
             score) also says the object's whole pose is like the demos'; until then it is moved along
@@ -122,7 +119,6 @@ class OcrJointConfig(PreTrainedConfig):
     threshold: float | None = None
     calibration_quantile: float = 0.02
     threshold_margin: float = 2.0
-    enter_margin: float = 0.0
     handback_components: int = 0
 
     # Recovery vector and planner.
@@ -190,8 +186,6 @@ class OcrJointConfig(PreTrainedConfig):
             raise ValueError(f"--policy.n_recovery_action_steps must be in [1, horizon={self.horizon}].")
         if not self.reg_covar > 0:
             raise ValueError(f"--policy.reg_covar must be > 0 (squared object units), got {self.reg_covar}.")
-        if not self.enter_margin >= 0:
-            raise ValueError(f"--policy.enter_margin must be >= 0 (nats), got {self.enter_margin}.")
         if self.handback_components < 0:
             raise ValueError(
                 f"--policy.handback_components must be 0 (off) or a number of mixture components, got "

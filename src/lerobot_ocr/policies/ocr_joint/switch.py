@@ -86,11 +86,7 @@ def needs_check(state: SwitchState, base_queued: int | None) -> bool:
 
 
 def decide(
-    score: torch.Tensor,
-    threshold: float,
-    state: SwitchState,
-    handback_ok: torch.Tensor | None = None,
-    enter_margin: float = 0.0,
+    score: torch.Tensor, threshold: float, state: SwitchState, handback_ok: torch.Tensor | None = None
 ) -> Decision:
     """The switch for one step: (B,) scores (NaN = not evaluated), the threshold and the state -> Decision.
 
@@ -98,9 +94,7 @@ def decide(
     else it needs a new chunk; a row on the base enters recovery (and needs a chunk) when score <
     threshold. A NaN score decides nothing: a row on the base stays there, a recovering row goes on
     with its chunk. `handback_ok` ((B,) bool, optional) is a second test a recovering row must also pass
-    to hand back (the joint keypoint density's); entering is the score's alone. `enter_margin` (>= 0,
-    score units) lowers the entering threshold only: a row on the base enters when score < threshold -
-    enter_margin, a recovering row still hands back at threshold (a hysteresis band below it).
+    to hand back (the joint keypoint density's); entering is the score's alone.
 
     Raises:
         ValueError: `score` (or `handback_ok`) is not (B,) for the state's B rows, or `score` is NaN
@@ -122,7 +116,7 @@ def decide(
                 "per row."
             )
         hand_back = hand_back & handback_ok.to(hand_back.device)
-    enter = ~state.recovering & (score < threshold - enter_margin)
+    enter = ~state.recovering & (score < threshold)
     recovering = (state.recovering & ~hand_back) | enter
     return Decision(recovering, enter, hand_back, enter | (chunk_done & ~hand_back))
 

@@ -591,6 +591,8 @@ class OcrJointPolicy(PreTrainedPolicy):
         """Switch the rows, plan the chunks they need, hand back; return the (B,) scores (NaN: unchecked)."""
         if obs is None:  # every row on the base, inside its chunk: nothing to decide
             self._new_chunks = None
+            if self._switch.base_steps is not None:  # PROBE: the rows' own clocks run on
+                self._switch.base_steps = self._switch.base_steps + 1
             return self._unchecked
         score = obs.recovery.score.to(device)
         due = self._base_due()

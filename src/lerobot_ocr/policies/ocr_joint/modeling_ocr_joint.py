@@ -17,6 +17,8 @@ works in the object frame of the current pose (see `lerobot_ocr.inverse_policy`)
 
 from __future__ import annotations
 
+import dataclasses
+
 import json
 import logging
 import os
@@ -592,7 +594,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         if obs is None:  # every row on the base, inside its chunk: nothing to decide
             self._new_chunks = None
             if self._switch.base_steps is not None:  # PROBE: the rows' own clocks run on
-                self._switch.base_steps = self._switch.base_steps + 1
+                self._switch = dataclasses.replace(self._switch, base_steps=self._switch.base_steps + 1)
             return self._unchecked
         score = obs.recovery.score.to(device)
         due = self._base_due()

@@ -120,8 +120,6 @@ class OcrJointConfig(PreTrainedConfig):
     calibration_quantile: float = 0.02
     threshold_margin: float = 2.0
     handback_components: int = 0
-    carry_on_entry: float | None = None  # PROBE: an entering row with the gripper closed this near is held
-    base_check_every: int | None = None  # PROBE: a row on the base is scored every k of its own steps
 
     # Recovery vector and planner.
     magnitude: str = "log_deficit"

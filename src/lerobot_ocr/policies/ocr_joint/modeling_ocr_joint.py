@@ -17,8 +17,6 @@ works in the object frame of the current pose (see `lerobot_ocr.inverse_policy`)
 
 from __future__ import annotations
 
-import dataclasses
-
 import json
 import logging
 import os
@@ -414,7 +412,6 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._chunk = torch.zeros(b, self.config.n_recovery_action_steps, action_dim, device=device)
         self._chunk_keypoints = self._chunk_pushes = None
         self._chunk_ee = self._chunk_centre = None
-        self._last_action = None  # PROBE
         self._unchecked = torch.full(
             (b,), float("nan"), dtype=torch.float64
         )  # the score where none was needed
@@ -572,34 +569,14 @@ class OcrJointPolicy(PreTrainedPolicy):
         continuing = self._switch.recovering[idx].to(keypoints.device)  # its last chunk was a recovery chunk
         tol = cfg.carry_tolerance
         held = continuing & closed & (torch.linalg.vector_norm(moved, dim=-1) > tol) & (apart < tol)
-        if cfg.carry_on_entry is not None and getattr(self, "_last_action", None) is not None:  # PROBE
-            closed_now = self._last_action[idx, cfg.gripper_action_index].to(keypoints.device) > 0
-            near = self._distance(obs.state[idx].to(keypoints), keypoints) < cfg.carry_on_entry
-            entering_held = ~continuing & closed_now & near
-            if bool(entering_held.any()):
-                rows = idx[entering_held.to(idx.device)]
-                self._chunk[rows, -1] = self._last_action[rows].to(self._chunk)  # carry from the base's target
-            held = held | entering_held
         return held.to(idx.device)
-
-    def _base_due(self) -> torch.Tensor | None:
-        """PROBE: (B,) bool, rows on the base at a multiple of base_check_every of their own steps."""
-        every = self.config.base_check_every
-        if every is None:
-            return None
-        return ~self._switch.recovering & (self._switch.base_steps % every == 0)
 
     def _decide(self, obs: Observed | None, noise: torch.Tensor | None, device) -> torch.Tensor:
         """Switch the rows, plan the chunks they need, hand back; return the (B,) scores (NaN: unchecked)."""
         if obs is None:  # every row on the base, inside its chunk: nothing to decide
             self._new_chunks = None
-            if self._switch.base_steps is not None:  # PROBE: the rows' own clocks run on
-                self._switch = dataclasses.replace(self._switch, base_steps=self._switch.base_steps + 1)
             return self._unchecked
         score = obs.recovery.score.to(device)
-        due = self._base_due()
-        if due is not None:  # PROBE: rows on the base off their own clock decide nothing
-            score = torch.where(~self._switch.recovering & ~due.to(device), torch.nan, score)
         decision = decide(score, float(self.manifold.threshold_), self._switch, obs.joint_ok)
         if bool(decision.needs_chunk.any()):
             self._plan_chunks(obs, decision.needs_chunk, noise)
@@ -654,7 +631,6 @@ class OcrJointPolicy(PreTrainedPolicy):
         if n_recovering:
             step = self._chunk.shape[1] - 1 - self._switch.actions_left
             action[recovering] = self._chunk[recovering, step[recovering]]
-        self._last_action = action.detach().clone()  # PROBE: carry_on_entry
         return action
 
     @torch.no_grad()
@@ -671,12 +647,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         state = batch[self.config.state_key]
         b, device = (1 if state.ndim == 1 else state.shape[0]), state.device
         self._start_rows(b, device)
-        due = self._base_due()
-        if due is None:
-            check = needs_check(self._switch, queued_actions(self.base))
-        else:
-            check = self._switch.n_recovering > 0 or bool(due.any())
-        obs = self._observe(batch) if check else None
+        obs = self._observe(batch) if needs_check(self._switch, queued_actions(self.base)) else None
         score = self._decide(obs, noise, device)
         self._scores.append(score.cpu())  # on the CPU already when unchecked
         self._modes.append(self._switch.recovering.cpu())

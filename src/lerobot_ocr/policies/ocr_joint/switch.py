@@ -36,7 +36,6 @@ class SwitchState:
     actions_left: torch.Tensor
     chunks: torch.Tensor
     handed_back: torch.Tensor
-    base_steps: torch.Tensor | None = None  # PROBE: (B,) long, steps on the base since it last started there
 
     @classmethod
     def start(cls, batch_size: int, device: torch.device | str = "cpu") -> SwitchState:
@@ -48,9 +47,7 @@ class SwitchState:
         def counts():
             return torch.zeros(batch_size, dtype=torch.long, device=device)
 
-        return cls(
-            recovering=flags(), actions_left=counts(), chunks=counts(), handed_back=flags(), base_steps=counts()
-        )
+        return cls(recovering=flags(), actions_left=counts(), chunks=counts(), handed_back=flags())
 
     @property
     def batch_size(self) -> int:
@@ -138,7 +135,4 @@ def advance(state: SwitchState, decision: Decision, chunk_size: int) -> SwitchSt
         torch.where(decision.enter, torch.zeros_like(state.chunks), state.chunks)
         + decision.needs_chunk.long()
     )
-    base_steps = None
-    if state.base_steps is not None:
-        base_steps = torch.where(decision.recovering, torch.zeros_like(state.base_steps), state.base_steps + 1)
-    return SwitchState(decision.recovering, left, chunks, state.handed_back | decision.hand_back, base_steps)
+    return SwitchState(decision.recovering, left, chunks, state.handed_back | decision.hand_back)

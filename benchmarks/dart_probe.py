@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -30,7 +29,7 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path[:0] = [str(REPO / "src")]
 
-from lerobot_ocr.pipeline import BIN, TASKS, Stages, base_train_args, chain_data, train  # noqa: E402
+from lerobot_ocr.pipeline import TASKS, Stages, base_train_args, chain_data, train  # noqa: E402
 
 
 class NoisyTarget:
@@ -110,20 +109,9 @@ def main() -> int:
     out = work / "ocr_rebased"
 
     def rebase():
-        subprocess.run(
-            [
-                str(BIN / "lerobot-ocr"),
-                "rebase",
-                "--policy-path",
-                args.ocr,
-                "--base-path",
-                str(base_ckpt),
-                "--output-dir",
-                str(out),
-                "--overwrite",
-            ],
-            check=True,
-        )
+        from lerobot_ocr.continual.rebase import rebase as rebase_checkpoint
+
+        rebase_checkpoint(args.ocr, base_ckpt, out, overwrite=True)
 
     stage("rebase", rebase)
     print(f"base: {base_ckpt}\njoint: {out}", flush=True)

@@ -7,8 +7,9 @@ question: does a base trained on such demos finish more of the states the recove
 
 Stages in `outputs/square_dart` (resumable, `Stages` markers): noisy demos (seed 0, 200 episodes, the
 chain's generator with the env's `step` wrapped), `base_data`, the base trained with the `cpu` profile's
-command (`base_train_args`, seed 1000), then `lerobot-ocr rebase` of the `cpu` chain's ocr_joint
-checkpoint onto it (same inverse policy, manifold and threshold). Evaluate with `benchmarks/probe.py`.
+command (`base_train_args`, seed 1000), then the clean `cpu` chain's data stages (in `--clean`) and its
+inverse policy trained with this base bundled (same inverse policy, manifold and threshold as the clean
+chain's ocr_joint checkpoint: a rebase). Evaluate with `benchmarks/probe.py`.
 
 Noise: piecewise constant over segments of `--segment` steps; each segment is noisy with probability
 `--p-noisy`, then the xyz target is offset by N(0, sigma_xy) in x, y and N(0, sigma_z) in z. The gripper
@@ -29,7 +30,7 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path[:0] = [str(REPO / "src")]
 
-from lerobot_ocr.pipeline import TASKS, Stages, base_train_args, chain_data, train  # noqa: E402
+from lerobot_ocr.pipeline import TASKS, Stages, base_train_args, chain_data, ocr_train_args, train  # noqa: E402
 
 
 class NoisyTarget:
@@ -84,7 +85,7 @@ def main() -> int:
     parser.add_argument("--segment", type=int, default=10)
     parser.add_argument("--p-noisy", type=float, default=0.5)
     parser.add_argument("--moving", type=float, default=0.001, help="m per step: the target moves")
-    parser.add_argument("--ocr", default="outputs/square_ocr_cpu/ocr/checkpoints/last/pretrained_model")
+    parser.add_argument("--clean", default="outputs/square_ocr_cpu", help="the clean chain's work dir")
     args = parser.parse_args()
     work = (REPO / args.work).resolve()
     work.mkdir(parents=True, exist_ok=True)
@@ -117,14 +118,17 @@ def main() -> int:
         ),
     )
     base_ckpt = base_out / "checkpoints" / "last" / "pretrained_model"
-    out = work / "ocr_rebased"
-
-    def rebase():
-        from lerobot_ocr.continual.rebase import rebase as rebase_checkpoint
-
-        rebase_checkpoint(args.ocr, base_ckpt, out, overwrite=True)
-
-    stage("rebase", rebase)
+    # The clean chain's inverse policy (its demos, converted; the `cpu` profile's command, seed 1000)
+    # trained with this base bundled: the inverse policy does not read the base, so this is the clean
+    # chain's ocr_joint checkpoint rebased onto the noise-trained base, built on a machine without it.
+    clean_work = (REPO / args.clean).resolve()
+    clean = chain_data(task, p, clean_work, [], Stages(clean_work))
+    out = work / "ocr"
+    stage(
+        "ocr_train",
+        lambda: train(ocr_train_args(task, p, clean, base_ckpt, out), out, work / "logs" / "ocr_train.log"),
+    )
+    out = out / "checkpoints" / "last" / "pretrained_model"
     print(f"base: {base_ckpt}\njoint: {out}", flush=True)
     return 0
 

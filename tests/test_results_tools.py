@@ -390,3 +390,81 @@ def test_paired_comparison_counts_discordant_episodes_and_gives_the_exact_mcnema
         paired.compare(a, run("c", [100, 300], [10, 30]))
     with pytest.raises(ValueError, match="episodes.json is missing"):
         paired.compare(a, tmp_path)
+
+
+def test_the_square_oracle_counts_the_joint_cells_budgets():
+    """`benchmarks/square_oracle_recovery.py`: a recovery step is 1/36 of a reference call, a base call 8
+    steps, 30 calls; the step budgets add both phases' steps."""
+    import square_oracle_recovery as oracle
+
+    assert oracle.finished_within(0, 240, "reference") and not oracle.finished_within(0, 241, "reference")
+    # 72 recovery steps = 2 calls, so the base keeps 28 calls = 224 steps
+    assert oracle.finished_within(72, 224, "reference") and not oracle.finished_within(72, 225, "reference")
+    assert oracle.finished_within(100, 300, "400") and not oracle.finished_within(101, 300, "400")
+    assert oracle.finished_within(700, 380, "1080") and not oracle.finished_within(0, -1, "1080")
+    rows = [
+        {
+            "flagged": True,
+            "handed_back": True,
+            "recovery_steps": 72,
+            "base_success_step": 200,
+            "held": True,
+            "score": 1.0,
+        },
+        {
+            "flagged": True,
+            "handed_back": False,
+            "recovery_steps": 700,
+            "base_success_step": 100,
+            "held": False,
+            "score": -3.0,
+        },
+        {"flagged": False, "handed_back": True, "recovery_steps": 0, "base_success_step": 250},
+    ]
+    s = oracle.summarise(rows)
+    assert (s["flagged"], s["handed_back"], s["held_at_hand_back"]) == (2, 1, 1)
+    assert s["within_reference_budget"]["rate"] == round(1 / 3, 3)  # row 1 never handed back, row 2 too slow
+    assert s["within_400_steps"]["rate"] == round(2 / 3, 3) and s["within_1080_steps_lower_bound"][
+        "rate"
+    ] == round(2 / 3, 3)
+
+
+@pytest.mark.slow
+def test_the_square_oracle_recovers_an_ood_nut_into_the_data_and_hands_it_back_held():
+    """The oracle inverse policy on the real Square env: a manifold fitted on three expert ID demos flags an
+    OOD start; the expert grasps the nut and the oracle carries it along the plan until the score passes
+    the threshold, with the nut still in the gripper."""
+    pytest.importorskip("robosuite")
+    import json
+
+    import numpy as np
+    import square_oracle_recovery as oracle
+    import torch
+
+    from lerobot_ocr.envs.square_env import make_square_ocr_env
+    from lerobot_ocr.experts.rollout import rollout
+    from lerobot_ocr.experts.square_expert import SquareExpert
+    from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
+    from lerobot_ocr.manifold import KeypointManifold
+
+    cfg = json.loads(
+        (Path(__file__).resolve().parents[1] / "configs" / "policy" / "ocr_joint_square.json").read_text()
+    )["policy"]
+    env = make_square_ocr_env(region="id", render_mode=None)
+    record = lambda obs, base: {"pose": base.object_pose()}  # noqa: E731
+    episodes = [rollout(env, SquareExpert(seed=seed), seed, 400, record=record) for seed in range(3)]
+    poses = [step["pose"] for episode in episodes for step in episode["steps"]]
+    env.close()
+    local = torch.as_tensor(resolve_keypoints(cfg["object_keypoints"]), dtype=torch.float32)
+    kp = pose_to_keypoints(torch.as_tensor(np.array(poses), dtype=torch.float32), local, "quat_wxyz").double()
+    manifold = KeypointManifold(n_components=2, score_type=cfg["score_type"]).fit(
+        kp, calibration_quantile=0.02
+    )
+    manifold.set_threshold(float(manifold.threshold_) - cfg["threshold_margin"])
+    env = make_square_ocr_env(region="ood", render_mode=None)
+    env.reset(seed=100000)
+    info, obs = oracle.Oracle(manifold, local, cfg, margin=0.0)(env.unwrapped, 100000)
+    env.close()
+    assert info["flagged"] and info["handed_back"] and info["held"], info
+    assert info["score"] >= float(manifold.threshold_) and 0 < info["recovery_steps"] < oracle.MAX_RECOVERY
+    assert info["carry_chunks"] >= 1 and obs["object_pose"][2] > 0.85  # carried in the air

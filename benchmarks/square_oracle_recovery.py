@@ -1,0 +1,265 @@
+"""Square: the base from the hand-back states of a perfect recovery (an oracle inverse policy).
+
+    MUJOCO_GL=egl .venv/bin/python benchmarks/square_oracle_recovery.py [--workdir outputs/square_ocr_cpu]
+        [--margins 0 2] [--episodes 100]
+
+Needs a Square chain's demos and base (`<workdir>/demos`, `<workdir>/base/checkpoints/last/pretrained_model`;
+`benchmarks/square_ocr.py --profile cpu` builds them); no inverse policy. It splits the joint policy's
+OOD result into what the recovery costs and what the base makes of the state it is handed, which a joint
+cell cannot (EXPERIMENTS.md, "The base from a perfect recovery's hand-back states").
+
+For each OOD start of the joint cells (seeds 100000+i, the same nut starts and robot noise), if the
+shipped config's keypoint manifold (`configs/policy/ocr_joint_square.json`, fitted on the demos' nut poses
+as `ocr_joint` training fits it) flags the first observation, the oracle recovers the nut the way the
+shipped recovery asks for and a perfect inverse policy would do it: the scripted expert reaches, grasps
+and lifts the nut 2 cm (its own re-grasps included), then the held nut is carried exactly along the plan
+(chunks of `n_recovery_action_steps` frames at `step_size` per frame along the normalised recovery vector,
+re-planned after each chunk: `carry_along_plan`'s motion) until the chunk ends with the score at or above
+the threshold + margin (`--margins`, nats). From that state LeRobot's own rollout runs the base for 400
+steps. A start that is not flagged goes to the base at once. Budgets as the joint cells count them: the
+reference's (a recovery step is 1/36 of a call, a base call 8 steps, 30 calls), 400 steps, and 1080 steps
+(base steps beyond 400 are not run, so that count is a lower bound).
+Writes `benchmarks/results/square_oracle_recovery.json` and prints a table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import math
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+sys.path[:0] = [str(REPO / "src")]
+
+OOD_SEED = 100000
+HELD_LIFT = 0.02  # m the nut must rise in the expert's lift before the carry starts (the grasp holds)
+MAX_RECOVERY = 700  # oracle steps before giving up (30 calls hold 1080 recovery steps)
+BASE_STEPS = 400
+CALLS, BASE_CALL, RECOVERY_CALL = 30, 8, 36
+
+
+def fit_manifold(demos: Path, cfg: dict):
+    """The shipped config's manifold on the demos' nut poses, thresholded as `ocr_joint` does."""
+    import pandas as pd
+    import torch
+
+    from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
+    from lerobot_ocr.manifold import KeypointManifold
+
+    files = sorted(demos.glob("data/*/*.parquet"))
+    if not files:
+        raise SystemExit(f"No demos under {demos}: run benchmarks/square_ocr.py --profile cpu first.")
+    pose = np.concatenate([np.stack(pd.read_parquet(f)["observation.object_pose"].to_numpy()) for f in files])
+    local = torch.as_tensor(resolve_keypoints(cfg["object_keypoints"]), dtype=torch.float32)
+    kp = pose_to_keypoints(torch.as_tensor(pose, dtype=torch.float32), local, "quat_wxyz")
+    manifold = KeypointManifold(n_components=cfg["n_components"], score_type=cfg["score_type"])
+    manifold.fit(kp.double(), calibration_quantile=cfg["calibration_quantile"])
+    manifold.set_threshold(float(manifold.threshold_) - cfg["threshold_margin"])
+    return manifold, local
+
+
+class Oracle:
+    """Recovers the nut of a reset Square env in place (see the module docstring); returns what it did."""
+
+    def __init__(self, manifold, local, cfg: dict, margin: float):
+        self.manifold, self.local, self.margin = manifold, local, margin
+        self.chunk, self.step = cfg["n_recovery_action_steps"], cfg["step_size"]
+
+    def score(self, env):
+        import torch
+
+        from lerobot_ocr.keypoints import pose_to_keypoints
+
+        pose = torch.as_tensor(env.object_pose(), dtype=torch.float32)[None]
+        kp = pose_to_keypoints(pose, self.local, "quat_wxyz").double()
+        return kp, self.manifold.recovery(kp)
+
+    def __call__(self, env, seed: int) -> tuple[dict, dict | None]:
+        import torch
+
+        from lerobot_ocr.envs.square_env import pose_to_action
+        from lerobot_ocr.experts.square_expert import SquareExpert
+
+        threshold = float(self.manifold.threshold_)
+        _, out = self.score(env)
+        if float(out.score[0]) >= threshold:
+            return {"flagged": False, "recovery_steps": 0, "handed_back": True}, None
+        expert, steps, obs = SquareExpert(seed=seed), 0, None
+        expert.reset(env)
+        held = False
+        while steps < MAX_RECOVERY and not held:  # the expert reaches, grasps and lifts
+            obs, *_ = env.step(expert.act(env))
+            steps += 1
+            held = (
+                expert.phase == "lift" and env.nut_pose_matrix()[2, 3] - expert.lift_start_nut_z >= HELD_LIFT
+            )
+        chunks = 0
+        while held and steps < MAX_RECOVERY:  # the held nut along the plan, chunk by chunk
+            kp, out = self.score(env)
+            if chunks and float(out.score[0]) >= threshold + self.margin:
+                break
+            vec = out.vector
+            if float(torch.linalg.vector_norm(vec)) < 1e-9:  # above the threshold: no deficit left
+                vec = self.manifold.recovery(kp, magnitude="paper").vector
+            unit = (vec / torch.linalg.vector_norm(vec).clamp_min(1e-12))[0].numpy()
+            for _ in range(self.chunk):
+                expert.target_pos = expert.target_pos + self.step * unit
+                obs, *_ = env.step(pose_to_action(expert.target_pos, expert.target_rot, 1.0))
+                steps += 1
+            chunks += 1
+        _, out = self.score(env)
+        handed = held and chunks > 0 and float(out.score[0]) >= threshold + self.margin
+        nut, eef = env.nut_pose_matrix()[:3, 3], env.eef_pose()[0]
+        info = {
+            "flagged": True,
+            "recovery_steps": steps,
+            "carry_chunks": chunks,
+            "handed_back": bool(handed),
+            "score": round(float(out.score[0]), 3),
+            "nut_xyz": np.round(nut, 4).tolist(),
+            "held": bool(np.linalg.norm(nut - eef) < 0.06),
+        }
+        return info, obs
+
+
+def run(workdir: Path, margin: float, episodes: int, batch: int, manifold, local, cfg) -> list[dict]:
+    """The oracle and then the base on `episodes` OOD starts: one row per start."""
+    import gymnasium as gym
+    import torch
+    from lerobot.envs.factory import make_env_pre_post_processors
+    from lerobot.envs.utils import freeze_after_episode_end
+    from lerobot.policies import make_pre_post_processors
+    from lerobot.policies.factory import get_policy_class
+    from lerobot.scripts.lerobot_eval import rollout
+
+    from lerobot_ocr.envs.configs import SquareOcrEnvConfig
+    from lerobot_ocr.envs.square_env import SquareOcrEnv
+
+    oracle, rows = Oracle(manifold, local, cfg, margin), {}
+
+    class Recovered(gym.Wrapper):  # reset(seed) = the OOD start, then the oracle's recovery
+        def reset(self, seed=None, options=None):
+            obs, info = self.env.reset(seed=seed)
+            rows[seed], after = oracle(self.env.unwrapped, seed)
+            return (after if after is not None else obs), info
+
+    path = workdir / "base" / "checkpoints" / "last" / "pretrained_model"
+    config = json.loads((path / "config.json").read_text())
+    policy = get_policy_class(config["type"]).from_pretrained(path)
+    policy.eval()
+    pre, post = make_pre_post_processors(policy.config, pretrained_path=str(path))
+    env_cfg = SquareOcrEnvConfig(region="ood", episode_length=BASE_STEPS)
+    env_pre, env_post = make_env_pre_post_processors(env_cfg=env_cfg, policy_cfg=policy.config)
+    kwargs = {
+        **{k: v for k, v in env_cfg.gym_kwargs.items() if k not in ("regions", "max_episode_steps")},
+        "visualization_size": 64,
+    }
+
+    def factory():
+        return gym.wrappers.TimeLimit(Recovered(SquareOcrEnv(**kwargs)), BASE_STEPS)
+
+    torch.manual_seed(0)
+    out = []
+    for first in range(0, episodes, batch):
+        seeds = [OOD_SEED + i for i in range(first, min(episodes, first + batch))]
+        env = gym.vector.SyncVectorEnv(
+            [freeze_after_episode_end(factory) for _ in seeds],
+            autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
+        )
+        success = rollout(env, policy, env_pre, env_post, pre, post, seeds=seeds)["success"].numpy()
+        env.close()
+        for seed, row in zip(seeds, success.astype(bool)):
+            base_step = int(row.argmax()) + 1 if row.any() else -1
+            out.append({"seed": seed, **rows[seed], "base_success_step": base_step})
+        print(f"  margin {margin}: {len(out)}/{episodes} episodes", flush=True)
+    return out
+
+
+def finished_within(recovery_steps: int, base_step: int, budget: str) -> bool:
+    """Whether an episode that recovered `recovery_steps` steps and then succeeded at the base's step
+    `base_step` (-1: never) did so within `budget`: "reference" (30 calls, a recovery step 1/36 of one, a
+    base call 8 steps), "400" or "1080" (env steps)."""
+    if base_step < 0:
+        return False
+    if budget == "reference":
+        return recovery_steps / RECOVERY_CALL + math.ceil(base_step / BASE_CALL) <= CALLS + 1e-9
+    return recovery_steps + base_step <= {"400": 400, "1080": 1080}[budget]
+
+
+def summarise(rows: list[dict]) -> dict:
+    from lerobot_ocr.eval_report import wilson_interval
+
+    def rate(ok: list[bool]) -> dict:
+        lo, hi = wilson_interval(sum(ok), len(ok))
+        return {"rate": round(sum(ok) / len(ok), 3), "ci95": [round(lo, 3), round(hi, 3)]}
+
+    def within(row: dict, budget: str) -> bool:
+        return row["handed_back"] and finished_within(row["recovery_steps"], row["base_success_step"], budget)
+
+    flagged = [r for r in rows if r["flagged"]]
+    handed = [r for r in flagged if r["handed_back"]]
+    solved = [r["base_success_step"] for r in rows if r["base_success_step"] > 0]
+    return {
+        "episodes": len(rows),
+        "flagged": len(flagged),
+        "handed_back": len(handed),
+        "mean_recovery_steps_handed_back": round(float(np.mean([r["recovery_steps"] for r in handed])), 1)
+        if handed
+        else None,
+        "held_at_hand_back": sum(r["held"] for r in handed),
+        "mean_score_at_hand_back": round(float(np.mean([r["score"] for r in handed])), 2) if handed else None,
+        "base_success_within_400_base_steps_after_hand_back": rate(
+            [r["base_success_step"] > 0 for r in rows]
+        ),
+        "within_reference_budget": rate([within(r, "reference") for r in rows]),
+        "within_400_steps": rate([within(r, "400") for r in rows]),
+        "within_1080_steps_lower_bound": rate([within(r, "1080") for r in rows]),
+        "mean_base_steps_to_success": round(float(np.mean(solved)), 1) if solved else None,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--workdir", default="outputs/square_ocr_cpu", help="the chain's work dir")
+    parser.add_argument(
+        "--margins", type=float, nargs="+", default=[0.0, 2.0], help="hand-back margins, nats"
+    )
+    parser.add_argument("--episodes", type=int, default=100)
+    parser.add_argument("--batch", type=int, default=10)
+    parser.add_argument("--out", default=str(HERE / "results" / "square_oracle_recovery.json"))
+    args = parser.parse_args()
+    workdir = Path(args.workdir)
+    cfg = json.loads((REPO / "configs" / "policy" / "ocr_joint_square.json").read_text())["policy"]
+    manifold, local = fit_manifold(workdir / "demos", cfg)
+    result = {
+        "command": "MUJOCO_GL=egl .venv/bin/python benchmarks/square_oracle_recovery.py "
+        + " ".join(sys.argv[1:]),
+        "machine": f"{platform.machine()}, {platform.processor() or 'cpu'}",
+        "date": dt.date.today().isoformat(),
+        "workdir": str(workdir),
+        "threshold": round(float(manifold.threshold_), 3),
+        "margins": {},
+    }
+    for margin in args.margins:
+        start = time.time()
+        rows = run(workdir, margin, args.episodes, args.batch, manifold, local, cfg)
+        result["margins"][str(margin)] = {
+            **summarise(rows),
+            "seconds": round(time.time() - start),
+            "rows": rows,
+        }
+        summary = {k: v for k, v in result["margins"][str(margin)].items() if k != "rows"}
+        print(json.dumps({"margin": margin, **summary}, indent=1), flush=True)
+        Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -441,12 +441,6 @@ class OcrJointPolicy(PreTrainedPolicy):
             state, cfg.state_key, "The robot state is missing or invalid; check the robot's readings."
         )
         recovery = self.manifold.recovery(keypoints.double(), magnitude=cfg.magnitude)
-        if cfg.handback_margin > 0:  # probe: rows in the band above the threshold keep a direction
-            band = ~recovery.is_ood & (recovery.score < self.manifold.threshold_ + cfg.handback_margin)
-            weak = band & (torch.linalg.vector_norm(recovery.vector, dim=-1) < 1e-9)
-            if bool(weak.any()):
-                paper = self.manifold.recovery(keypoints.double(), magnitude="paper").vector
-                recovery.vector = torch.where(weak[:, None], paper, recovery.vector)
         joint_ok = None
         if self.joint_density is not None:
             joint_score, joint_grad = self.joint_density.score_and_gradient(keypoints.double())

@@ -67,16 +67,3 @@ def test_when_a_check_is_needed():
 def test_decide_rejects_scores_for_other_rows():
     with pytest.raises(ValueError, match="one per row"):
         decide(torch.zeros(3), 0.0, SwitchState.start(2))
-
-
-def test_a_handback_margin_hands_back_only_above_the_threshold_plus_the_margin():
-    # one chunk of 1 action: the row enters at -1, stays recovering at 0.5 (above the threshold 0 but
-    # under 0 + margin 1), hands back at 1.5; a row on the base at 0.5 does not enter
-    state = SwitchState.start(2)
-    modes = []
-    for scores in ([-1.0, 0.5], [0.5, 0.5], [1.5, 0.5]):
-        decision = decide(torch.tensor(scores, dtype=torch.float64), 0.0, state, handback_margin=1.0)
-        state = advance(state, decision, 1)
-        modes.append(decision.recovering.tolist())
-    assert modes == [[True, False], [True, False], [False, False]]
-    assert state.handed_back.tolist() == [True, False]

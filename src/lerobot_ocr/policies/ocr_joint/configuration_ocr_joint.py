@@ -64,8 +64,6 @@ class OcrJointConfig(PreTrainedConfig):
             score) also says the object's whole pose is like the demos'; until then it is moved along
             that density's translation gradient. Its mixture is fitted in standardised coordinates with
             its own reg_covar (1e-3), not `reg_covar`. Beyond the paper.
-        handback_margin: nats above the threshold a recovering row's score must reach to hand back
-            (entering stays `score < threshold`). Default 0.0 (the paper's single threshold). Probe.
     Recovery
         magnitude: recovery vector magnitude, "log_deficit" (default) or "paper" (q(|grad p|)).
         step_size: alpha, object units the planned keypoints move per frame. Default 5.0.
@@ -122,7 +120,6 @@ class OcrJointConfig(PreTrainedConfig):
     calibration_quantile: float = 0.02
     threshold_margin: float = 2.0
     handback_components: int = 0
-    handback_margin: float = 0.0
 
     # Recovery vector and planner.
     magnitude: str = "log_deficit"
@@ -194,8 +191,6 @@ class OcrJointConfig(PreTrainedConfig):
                 f"--policy.handback_components must be 0 (off) or a number of mixture components, got "
                 f"{self.handback_components}."
             )
-        if not self.handback_margin >= 0:
-            raise ValueError(f"--policy.handback_margin must be >= 0 (nats), got {self.handback_margin}.")
         if not self.d_max > self.d_min:
             raise ValueError(f"Need d_max > d_min, got d_min={self.d_min}, d_max={self.d_max}.")
         if self.stall_distance is not None and not self.stall_distance > 0:

@@ -577,9 +577,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             self._new_chunks = None
             return self._unchecked
         score = obs.recovery.score.to(device)
-        decision = decide(
-            score, float(self.manifold.threshold_), self._switch, obs.joint_ok, self.config.handback_margin
-        )
+        decision = decide(score, float(self.manifold.threshold_), self._switch, obs.joint_ok)
         if bool(decision.needs_chunk.any()):
             self._plan_chunks(obs, decision.needs_chunk, noise)
         if bool(decision.hand_back.any()):

@@ -86,11 +86,7 @@ def needs_check(state: SwitchState, base_queued: int | None) -> bool:
 
 
 def decide(
-    score: torch.Tensor,
-    threshold: float,
-    state: SwitchState,
-    handback_ok: torch.Tensor | None = None,
-    handback_margin: float = 0.0,
+    score: torch.Tensor, threshold: float, state: SwitchState, handback_ok: torch.Tensor | None = None
 ) -> Decision:
     """The switch for one step: (B,) scores (NaN = not evaluated), the threshold and the state -> Decision.
 
@@ -98,8 +94,7 @@ def decide(
     else it needs a new chunk; a row on the base enters recovery (and needs a chunk) when score <
     threshold. A NaN score decides nothing: a row on the base stays there, a recovering row goes on
     with its chunk. `handback_ok` ((B,) bool, optional) is a second test a recovering row must also pass
-    to hand back (the joint keypoint density's); entering is the score's alone. `handback_margin`
-    (nats >= 0) raises the hand-back test to score >= threshold + handback_margin.
+    to hand back (the joint keypoint density's); entering is the score's alone.
 
     Raises:
         ValueError: `score` (or `handback_ok`) is not (B,) for the state's B rows, or `score` is NaN
@@ -113,7 +108,7 @@ def decide(
     chunk_done = state.recovering & (state.actions_left == 0)
     if bool((chunk_done & score.isnan()).any()):
         raise ValueError("A recovering row whose chunk has run needs a score (got NaN): score every row.")
-    hand_back = chunk_done & (score >= threshold + handback_margin)
+    hand_back = chunk_done & (score >= threshold)
     if handback_ok is not None:
         if handback_ok.shape != state.recovering.shape:
             raise ValueError(

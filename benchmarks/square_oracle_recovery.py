@@ -16,7 +16,8 @@ and lifts the nut 2 cm (its own re-grasps included), then the held nut is carrie
 (chunks of `n_recovery_action_steps` frames at `step_size` per frame along the normalised recovery vector,
 re-planned after each chunk: `carry_along_plan`'s motion) until the chunk ends with the score at or above
 the threshold + margin (`--margins`, nats). From that state LeRobot's own rollout runs the base for 400
-steps. A start that is not flagged goes to the base at once. Budgets as the joint cells count them: the
+steps (it never switches back; the first step at which the nut scores below the threshold again, where the
+joint policy would re-enter recovery, is recorded). A start that is not flagged goes to the base at once. Budgets as the joint cells count them: the
 reference's (a recovery step is 1/36 of a call, a base call 8 steps, 30 calls), 400 steps, and 1080 steps
 (base steps beyond 400 are not run, so that count is a lower bound).
 Writes `benchmarks/results/square_oracle_recovery.json` and prints a table.
@@ -130,6 +131,34 @@ class Oracle:
         return info, obs
 
 
+def first_dips(oracle: Oracle, poses, success: np.ndarray) -> list[dict]:
+    """Per row of a base rollout, the first base step (0 = the hand-back) before its success whose nut the
+    manifold scores below the threshold, where the joint policy would take the nut back into recovery:
+    at any step (a batched eval scores every step while another row recovers) and on the base's own
+    clock (every `BASE_CALL` steps, as at batch 1). -1: none. poses (B, T + 1, 7), success (B, T)."""
+    import torch
+
+    from lerobot_ocr.keypoints import pose_to_keypoints
+
+    b, t1 = poses.shape[:2]
+    kp = pose_to_keypoints(
+        torch.as_tensor(poses, dtype=torch.float32).reshape(-1, 7), oracle.local, "quat_wxyz"
+    )
+    below = (oracle.manifold.score(kp.double()) < float(oracle.manifold.threshold_)).reshape(b, t1).numpy()
+    out = []
+    for row in range(b):
+        end = int(success[row].argmax()) + 1 if success[row].any() else t1
+        steps = np.flatnonzero(below[row, :end])
+        clock = steps[steps % BASE_CALL == 0]
+        out.append(
+            {
+                "dip_step": int(steps[0]) if len(steps) else -1,
+                "dip_step_base_clock": int(clock[0]) if len(clock) else -1,
+            }
+        )
+    return out
+
+
 def run(workdir: Path, margin: float, episodes: int, batch: int, manifold, local, cfg) -> list[dict]:
     """The oracle and then the base on `episodes` OOD starts: one row per start."""
     import gymnasium as gym
@@ -174,11 +203,14 @@ def run(workdir: Path, margin: float, episodes: int, batch: int, manifold, local
             [freeze_after_episode_end(factory) for _ in seeds],
             autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
         )
-        success = rollout(env, policy, env_pre, env_post, pre, post, seeds=seeds)["success"].numpy()
+        result = rollout(env, policy, env_pre, env_post, pre, post, seeds=seeds, return_observations=True)
         env.close()
-        for seed, row in zip(seeds, success.astype(bool)):
+        success = result["success"].numpy().astype(bool)
+        key = next(k for k in result["observation"] if k.endswith("object_pose"))
+        dips = first_dips(oracle, result["observation"][key], success)
+        for seed, row, dip in zip(seeds, success, dips):
             base_step = int(row.argmax()) + 1 if row.any() else -1
-            out.append({"seed": seed, **rows[seed], "base_success_step": base_step})
+            out.append({"seed": seed, **rows[seed], "base_success_step": base_step, **dip})
         print(f"  margin {margin}: {len(out)}/{episodes} episodes", flush=True)
     return out
 
@@ -207,8 +239,12 @@ def summarise(rows: list[dict]) -> dict:
     flagged = [r for r in rows if r["flagged"]]
     handed = [r for r in flagged if r["handed_back"]]
     solved = [r["base_success_step"] for r in rows if r["base_success_step"] > 0]
+    dipped = [r for r in rows if r.get("dip_step", -1) >= 0]
     return {
         "episodes": len(rows),
+        "base_would_reenter_recovery_any_step": len(dipped),
+        "of_those_solved_by_the_base_alone": sum(r["base_success_step"] > 0 for r in dipped),
+        "base_would_reenter_recovery_on_its_clock": sum(r.get("dip_step_base_clock", -1) >= 0 for r in rows),
         "flagged": len(flagged),
         "handed_back": len(handed),
         "mean_recovery_steps_handed_back": round(float(np.mean([r["recovery_steps"] for r in handed])), 1)

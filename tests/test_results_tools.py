@@ -468,3 +468,32 @@ def test_the_square_oracle_recovers_an_ood_nut_into_the_data_and_hands_it_back_h
     assert info["flagged"] and info["handed_back"] and info["held"], info
     assert info["score"] >= float(manifold.threshold_) and 0 < info["recovery_steps"] < oracle.MAX_RECOVERY
     assert info["carry_chunks"] >= 1 and obs["object_pose"][2] > 0.85  # carried in the air
+
+
+def test_the_square_oracle_finds_where_the_base_would_reenter_recovery():
+    """`first_dips`: the first step before success whose nut scores below the threshold, at any step and on
+    the base's 8-step clock; steps after success do not count."""
+    import numpy as np
+    import square_oracle_recovery as oracle
+    import torch
+
+    class Manifold:  # scores the keypoints' mean height: below 0 is out of distribution
+        threshold_ = torch.tensor(0.0)
+
+        def score(self, kp):
+            return kp[..., 2].mean(-1)
+
+    stub = oracle.Oracle.__new__(oracle.Oracle)
+    stub.manifold, stub.local = Manifold(), torch.zeros(1, 3)
+    poses = np.zeros((3, 21, 7))
+    poses[..., 3] = 1.0  # identity rotation
+    poses[..., 2] = 1.0
+    poses[0, 5, 2] = poses[0, 16, 2] = -1.0  # row 0 dips at step 5 and, on the clock, at 16
+    poses[1, 12, 2] = -1.0  # row 1 dips only after its success at step 10
+    success = np.zeros((3, 20), bool)
+    success[1, 9:] = True
+    assert oracle.first_dips(stub, poses, success) == [
+        {"dip_step": 5, "dip_step_base_clock": 16},
+        {"dip_step": -1, "dip_step_base_clock": -1},
+        {"dip_step": -1, "dip_step_base_clock": -1},
+    ]

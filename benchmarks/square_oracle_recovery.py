@@ -17,10 +17,10 @@ and lifts the nut 2 cm (its own re-grasps included), then the held nut is carrie
 re-planned after each chunk: `carry_along_plan`'s motion) until the chunk ends with the score at or above
 the threshold + margin (`--margins`, nats). From that state LeRobot's own rollout runs the base for 400
 steps (it never switches back; the first step at which the nut scores below the threshold again, where the
-joint policy would re-enter recovery, is recorded). A start that is not flagged goes to the base at once. Budgets as the joint cells count them: the
-reference's (a recovery step is 1/36 of a call, a base call 8 steps, 30 calls), 400 steps, and 1080 steps
-(base steps beyond 400 are not run, so that count is a lower bound).
-Writes `benchmarks/results/square_oracle_recovery.json` and prints a table.
+joint policy would re-enter recovery, is recorded). A start that is not flagged goes to the base at once.
+Budgets as the joint cells count them: the reference's (a recovery step is 1/36 of a call, a base call 8
+steps, 30 calls), 400 steps, and 1080 steps (base steps beyond 400 are not run, so that count is a lower
+bound). Writes `benchmarks/results/square_oracle_recovery.json` and prints each margin's summary.
 """
 
 from __future__ import annotations

@@ -42,6 +42,7 @@ sys.path[:0] = [str(REPO / "src")]
 
 OOD_SEED = 100000
 HELD_LIFT = 0.02  # m the nut must rise in the expert's lift before the carry starts (the grasp holds)
+HELD_DISTANCE = 0.03  # m from the grip site to the nut's handle (the expert grasps there): held
 MAX_RECOVERY = 700  # oracle steps before giving up (30 calls hold 1080 recovery steps)
 BASE_STEPS = 400
 CALLS, BASE_CALL, RECOVERY_CALL = 30, 8, 36
@@ -118,7 +119,7 @@ class Oracle:
             chunks += 1
         _, out = self.score(env)
         handed = held and chunks > 0 and float(out.score[0]) >= threshold + self.margin
-        nut, eef = env.nut_pose_matrix()[:3, 3], env.eef_pose()[0]
+        nut, eef, handle = env.nut_pose_matrix()[:3, 3], env.eef_pose()[0], env.handle_position()
         info = {
             "flagged": True,
             "recovery_steps": steps,
@@ -126,7 +127,8 @@ class Oracle:
             "handed_back": bool(handed),
             "score": round(float(out.score[0]), 3),
             "nut_xyz": np.round(nut, 4).tolist(),
-            "held": bool(np.linalg.norm(nut - eef) < 0.06),
+            "handle_to_gripper_cm": round(float(np.linalg.norm(handle - eef)) * 100, 2),
+            "held": bool(np.linalg.norm(handle - eef) < HELD_DISTANCE),
         }
         return info, obs
 
@@ -262,6 +264,25 @@ def summarise(rows: list[dict]) -> dict:
     }
 
 
+def machine() -> str:
+    """Architecture, CPU model, cores and Python, for the result file."""
+    import os
+
+    model = (
+        next(
+            (
+                line.split(":", 1)[1].strip()
+                for line in Path("/proc/cpuinfo").read_text().splitlines()
+                if line.startswith("model name")
+            ),
+            platform.processor() or "cpu",
+        )
+        if Path("/proc/cpuinfo").exists()
+        else platform.processor() or "cpu"
+    )
+    return f"{platform.machine()}, {model}, {os.cpu_count()} cores, python {platform.python_version()}"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workdir", default="outputs/square_ocr_cpu", help="the chain's work dir")
@@ -278,7 +299,7 @@ def main() -> None:
     result = {
         "command": "MUJOCO_GL=egl .venv/bin/python benchmarks/square_oracle_recovery.py "
         + " ".join(sys.argv[1:]),
-        "machine": f"{platform.machine()}, {platform.processor() or 'cpu'}",
+        "machine": machine(),
         "date": dt.date.today().isoformat(),
         "workdir": str(workdir),
         "threshold": round(float(manifold.threshold_), 3),

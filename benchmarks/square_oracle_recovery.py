@@ -51,20 +51,13 @@ CALLS, BASE_CALL, RECOVERY_CALL = 30, 8, 36
 def fit_manifold(demos: Path, cfg: dict):
     """The shipped config's manifold on the demos' nut poses, thresholded as `ocr_joint` does."""
     import pandas as pd
-    import torch
-
-    from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
-    from lerobot_ocr.manifold import KeypointManifold
+    from square_recovery_path import shipped_manifold
 
     files = sorted(demos.glob("data/*/*.parquet"))
     if not files:
         raise SystemExit(f"No demos under {demos}: run benchmarks/square_ocr.py --profile cpu first.")
     pose = np.concatenate([np.stack(pd.read_parquet(f)["observation.object_pose"].to_numpy()) for f in files])
-    local = torch.as_tensor(resolve_keypoints(cfg["object_keypoints"]), dtype=torch.float32)
-    kp = pose_to_keypoints(torch.as_tensor(pose, dtype=torch.float32), local, "quat_wxyz")
-    manifold = KeypointManifold(n_components=cfg["n_components"], score_type=cfg["score_type"])
-    manifold.fit(kp.double(), calibration_quantile=cfg["calibration_quantile"])
-    manifold.set_threshold(float(manifold.threshold_) - cfg["threshold_margin"])
+    manifold, local, _ = shipped_manifold(pose, cfg)
     return manifold, local
 
 
@@ -268,18 +261,10 @@ def machine() -> str:
     """Architecture, CPU model, cores and Python, for the result file."""
     import os
 
-    model = (
-        next(
-            (
-                line.split(":", 1)[1].strip()
-                for line in Path("/proc/cpuinfo").read_text().splitlines()
-                if line.startswith("model name")
-            ),
-            platform.processor() or "cpu",
-        )
-        if Path("/proc/cpuinfo").exists()
-        else platform.processor() or "cpu"
-    )
+    cpuinfo = Path("/proc/cpuinfo")
+    lines = cpuinfo.read_text().splitlines() if cpuinfo.exists() else []
+    models = [line.split(":", 1)[1].strip() for line in lines if line.startswith("model name")]
+    model = models[0] if models else platform.processor() or "cpu"
     return f"{platform.machine()}, {model}, {os.cpu_count()} cores, python {platform.python_version()}"
 
 

@@ -212,6 +212,23 @@ def measured_recovery(cell: Path) -> dict:
     }
 
 
+def shipped_manifold(pose: np.ndarray, cfg: dict):
+    """The shipped config's keypoint manifold fitted on (N, 7) nut poses [x, y, z, qw, qx, qy, qz] and
+    thresholded as `ocr_joint` training does (calibrated quantile minus `threshold_margin`).
+    Returns (manifold, local keypoints (K, 3) float32 tensor, world keypoints (N, K, 3))."""
+    import torch
+
+    from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
+    from lerobot_ocr.manifold import KeypointManifold
+
+    local = torch.as_tensor(resolve_keypoints(cfg["object_keypoints"]), dtype=torch.float32)
+    kp = pose_to_keypoints(torch.as_tensor(pose, dtype=torch.float32), local, "quat_wxyz")
+    manifold = KeypointManifold(n_components=cfg["n_components"], score_type=cfg["score_type"])
+    manifold.fit(kp.double(), calibration_quantile=cfg["calibration_quantile"])
+    manifold.set_threshold(float(manifold.threshold_) - cfg["threshold_margin"])
+    return manifold, local, kp
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--demos", default="outputs/square_ocr_cpu/demos", help="the chain's demos dataset")
@@ -224,10 +241,7 @@ def main() -> None:
     parser.add_argument("--out", default=str(HERE / "results" / "square_recovery_path.json"))
     args = parser.parse_args()
     import pandas as pd
-    import torch
 
-    from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
-    from lerobot_ocr.manifold import KeypointManifold
     from lerobot_ocr.planner import recovery_delay
 
     files = sorted(Path(args.demos).glob("data/*/*.parquet"))
@@ -242,11 +256,7 @@ def main() -> None:
     state = np.stack(df["observation.state"].to_numpy()).astype(np.float32)
     action = np.stack(df["action"].to_numpy()).astype(np.float32)
     episode = df["episode_index"].to_numpy()
-    local = resolve_keypoints(cfg["object_keypoints"])
-    kp = pose_to_keypoints(torch.as_tensor(pose), torch.as_tensor(local, dtype=torch.float32), "quat_wxyz")
-    manifold = KeypointManifold(n_components=cfg["n_components"], score_type=cfg["score_type"])
-    manifold.fit(kp.double(), calibration_quantile=cfg["calibration_quantile"])
-    manifold.set_threshold(float(manifold.threshold_) - cfg["threshold_margin"])
+    manifold, local, kp = shipped_manifold(pose, cfg)
     first = np.r_[True, episode[1:] != episode[:-1]]
     chunk = cfg["n_recovery_action_steps"]
     still = int(recovery_delay(TRACED_GRASP, cfg["d_min"], cfg["d_max"], cfg["horizon"]))

@@ -20,7 +20,8 @@ steps (it never switches back; the first step at which the nut scores below the 
 joint policy would re-enter recovery, is recorded). A start that is not flagged goes to the base at once.
 Budgets as the joint cells count them: the reference's (a recovery step is 1/36 of a call, a base call 8
 steps, 30 calls), 400 steps, and 1080 steps (base steps beyond 400 are not run, so that count is a lower
-bound). Writes `benchmarks/results/square_oracle_recovery.json` and prints each margin's summary.
+bound). Writes `benchmarks/results/square_oracle_recovery.json` and its RESULTS.md section, and prints
+each margin's summary.
 """
 
 from __future__ import annotations
@@ -46,6 +47,7 @@ HELD_DISTANCE = 0.03  # m from the grip site to the nut's handle (the expert gra
 MAX_RECOVERY = 700  # oracle steps before giving up (30 calls hold 1080 recovery steps)
 BASE_STEPS = 400
 CALLS, BASE_CALL, RECOVERY_CALL = 30, 8, 36
+TITLE = "Square oracle recovery"
 
 
 def fit_manifold(demos: Path, cfg: dict):
@@ -257,6 +259,35 @@ def summarise(rows: list[dict]) -> dict:
     }
 
 
+def section(result: dict) -> str:
+    """The RESULTS.md section of a result file: one table row per hand-back margin."""
+    lines = [
+        "The Square `cpu` chain's base from the hand-back states of an oracle recovery (the scripted expert "
+        "grasps, the held nut is carried along the shipped plan to the shipped hand-back test, then the base "
+        "runs 400 steps and never switches back), on the joint cells' OOD starts (seeds 100000+i). Reading: "
+        'EXPERIMENTS.md, "The base from a perfect recovery\'s hand-back states".',
+        "",
+        "| hand-back margin (nats) | episodes | handed back | mean first hand-back step "
+        "| within the reference budget | within 400 steps | base steps to success (mean) "
+        "| base runs that would re-enter recovery |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for margin, m in result["margins"].items():
+        ref, strict = m["within_reference_budget"], m["within_400_steps"]
+        lines.append(
+            f"| {margin} | {m['episodes']} | {m['handed_back']} | {m['mean_recovery_steps_handed_back']} | "
+            f"{ref['rate']:.2f} [{ref['ci95'][0]:.2f}, {ref['ci95'][1]:.2f}] | {strict['rate']:.2f} | "
+            f"{m['mean_base_steps_to_success']} | {m['base_would_reenter_recovery_any_step']} |"
+        )
+    lines += [
+        "",
+        f"Machine: {result['machine']}. Date: {result['date']}.",
+        "",
+        f"Command: `{result['command']}`",
+    ]
+    return "\n".join(lines)
+
+
 def machine() -> str:
     """Architecture, CPU model, cores and Python, for the result file."""
     import os
@@ -278,6 +309,8 @@ def main() -> None:
     parser.add_argument("--batch", type=int, default=10)
     parser.add_argument("--out", default=str(HERE / "results" / "square_oracle_recovery.json"))
     args = parser.parse_args()
+    from results_md import update_section
+
     workdir = Path(args.workdir)
     cfg = json.loads((REPO / "configs" / "policy" / "ocr_joint_square.json").read_text())["policy"]
     manifold, local = fit_manifold(workdir / "demos", cfg)
@@ -301,6 +334,7 @@ def main() -> None:
         summary = {k: v for k, v in result["margins"][str(margin)].items() if k != "rows"}
         print(json.dumps({"margin": margin, **summary}, indent=1), flush=True)
         Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
+        update_section(TITLE, section(result))
 
 
 if __name__ == "__main__":

@@ -427,6 +427,8 @@ def test_the_square_oracle_counts_the_joint_cells_budgets():
     assert s["within_400_steps"]["rate"] == round(2 / 3, 3) and s["within_1080_steps_lower_bound"][
         "rate"
     ] == round(2 / 3, 3)
+    text = oracle.section({"margins": {"0.0": s}, "machine": "m", "date": "d", "command": "c"})
+    assert "| 0.0 | 3 | 1 | 72.0 | 0.33 [" in text and "Command: `c`" in text
 
 
 @pytest.mark.slow

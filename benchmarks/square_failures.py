@@ -32,6 +32,9 @@ from lerobot_ocr.eval_report import episode_modes, episode_steps, success_steps 
 from lerobot_ocr.eval_resume import replayable_batches  # noqa: E402
 
 GRIPPER_INDEX = -1  # the action's gripper command: -1 open, +1 closed (`square_env`)
+# a grasp held: the nut lifted 1 cm within 20 steps of the close, the hand within 3 cm of the handle
+HOLD_WINDOW, HELD_LIFT, HELD_NEAR = 20, 0.01, 0.03
+CLOSING = 10  # steps the scripted expert holds still while its fingers close (its `close_steps`)
 SETTLE = 30  # steps after a reset by which the nut has dropped onto the table (by 10), before a grasp
 
 
@@ -43,6 +46,53 @@ def ending(recovering: np.ndarray, solved: bool) -> str:
     if recovering.all():
         return "never handed back"
     return "ended in a later recovery" if recovering[-1] else "ended on the base"
+
+
+def grasp_events(
+    gripper: np.ndarray,
+    recovering: np.ndarray,
+    nut_z: np.ndarray,
+    eef_handle: np.ndarray,
+    rest_z: float,
+    offset: np.ndarray | None = None,
+    eef: np.ndarray | None = None,
+) -> dict:
+    """The recovery's grasps, from (n,) gripper commands and modes and the (n+1,) nut heights (m) and
+    end-effector-to-handle distances (m) before each step: for every close command sent while recovering,
+    the distance (cm) when it was sent and whether it held (within HOLD_WINDOW steps the nut rose HELD_LIFT
+    above its height at the close with the end effector within HELD_NEAR of the handle); and the first
+    step at which the nut is held anywhere in the episode (lifted HELD_LIFT above `rest_z`, the gripper
+    closed, the end effector within HELD_NEAR of the handle; -1 if never). With `offset` (n+1, 3), the
+    end effector minus the handle (m, world), each close's horizontal and vertical parts (cm) too; with
+    `eef` (n+1, 3), how far (cm) the end effector moved in the CLOSING steps after each close."""
+    n = len(gripper)
+    closing = (gripper > 0) & (np.r_[-1.0, gripper[:-1]] <= 0) & recovering
+    near = eef_handle[1:] <= HELD_NEAR  # after step t
+    distances, held = [], []
+    for t in np.nonzero(closing)[0]:
+        window = slice(t, min(n, t + HOLD_WINDOW))
+        rose = nut_z[1:][window] - nut_z[t] >= HELD_LIFT
+        distances.append(round(float(100 * eef_handle[t]), 2))
+        held.append(bool((rose & near[window] & (gripper[window] > 0)).any()))
+    holding = (nut_z[1:] - rest_z >= HELD_LIFT) & near & (gripper > 0)
+    first = np.nonzero(holding)[0]
+    closes = np.nonzero(closing)[0]
+    split = {}
+    if offset is not None:
+        split = {
+            "close_xy_cm": [round(float(100 * np.linalg.norm(offset[t, :2])), 2) for t in closes],
+            "close_dz_cm": [round(float(100 * offset[t, 2]), 2) for t in closes],
+        }
+    if eef is not None:  # how far the hand moved while the fingers closed (the expert holds still)
+        split["close_move_cm"] = [
+            round(float(100 * np.linalg.norm(eef[min(n, t + CLOSING)] - eef[t])), 2) for t in closes
+        ]
+    return {
+        **split,
+        "close_handle_cm": distances,
+        "close_held": held,
+        "first_hold_step": int(first[0] + 1) if len(first) else -1,
+    }
 
 
 def grasps(gripper: np.ndarray, recovering: np.ndarray) -> int:
@@ -65,17 +115,21 @@ def replay(env, seed: int, actions: np.ndarray, steps: int) -> dict:
     positions (3,) and the peg's (3,)."""
     obs, _ = env.reset(seed=seed)
     poses, success = [obs["object_pose"]], []
+    eefs, handles = [env.eef_pose()[0]], [env.handle_position()]
     for t in range(steps):
         obs, r, *_ = env.step(actions[t])
         poses.append(obs["object_pose"])
         success.append(r >= 1.0)
-    eef, _ = env.eef_pose()
+        eefs.append(env.eef_pose()[0])
+        handles.append(env.handle_position())
     return {
         "pose": np.array(poses),
         "success": np.array(success, dtype=bool),
-        "handle": env.handle_position(),
-        "eef": eef,
+        "handle": handles[-1],
+        "eef": eefs[-1],
         "peg": env.peg_position(),
+        "eef_track": np.array(eefs),
+        "handle_track": np.array(handles),
     }
 
 
@@ -113,8 +167,13 @@ def episodes(cell: Path, region: str = "ood") -> list[dict]:
             closed = np.nonzero(gripper > 0)[0]
             settled = min(SETTLE, n, int(closed[0]) if len(closed) else n)
             rest, pose = rep["pose"][settled], rep["pose"][-1]
+            offset = rep["eef_track"] - rep["handle_track"]
+            eef_handle = np.linalg.norm(offset, axis=1)
             out.append(
                 {
+                    **grasp_events(
+                        gripper, rec, rep["pose"][:, 2], eef_handle, float(rest[2]), offset, rep["eef_track"]
+                    ),
                     "seed": int(seed),
                     "started_ood": bool(rec[0]),
                     "steps": int(n),
@@ -170,6 +229,44 @@ def describe(rows: list[dict]) -> dict:
     return out
 
 
+def grasp_summary(rows: list[dict]) -> dict:
+    """Pooled `grasp_events` of `rows`: close commands, how many held, the (p25, median, p75)
+    hand-to-handle distances (cm) of held and missed closes, of the first held step and of the misses
+    before it."""
+
+    def q(values) -> list[float] | None:
+        v = np.asarray(values, dtype=float)
+        return [round(float(x), 1) for x in np.percentile(v, [25, 50, 75])] if len(v) else None
+
+    dist = [d for r in rows for d in r["close_handle_cm"]]
+    held = [h for r in rows for h in r["close_held"]]
+    firsts = [r["first_hold_step"] for r in rows if r["first_hold_step"] > 0]
+    before = [r["close_held"].index(True) for r in rows if True in r["close_held"]]
+    xy = [d for r in rows for d in r.get("close_xy_cm", [])]
+    dz = [d for r in rows for d in r.get("close_dz_cm", [])]
+    move = [d for r in rows for d in r.get("close_move_cm", [])]
+    split = {}
+    if len(xy) == len(held):
+        split = {
+            "held_xy_cm": q([d for d, h in zip(xy, held) if h]),
+            "missed_xy_cm": q([d for d, h in zip(xy, held) if not h]),
+            "held_dz_cm": q([d for d, h in zip(dz, held) if h]),
+            "missed_dz_cm": q([d for d, h in zip(dz, held) if not h]),
+            "held_move_cm": q([d for d, h in zip(move, held) if h]),
+            "missed_move_cm": q([d for d, h in zip(move, held) if not h]),
+        }
+    return {
+        **split,
+        "closes": len(held),
+        "held": int(sum(held)),
+        "held_handle_cm": q([d for d, h in zip(dist, held) if h]),
+        "missed_handle_cm": q([d for d, h in zip(dist, held) if not h]),
+        "first_hold_step": q(firsts),
+        "never_held": sum(r["first_hold_step"] < 0 for r in rows),
+        "closes_before_hold": q(before),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cell", required=True, help="a joint eval cell's --output_dir (with batches/)")
@@ -187,6 +284,18 @@ def main() -> None:
     for name, g in groups.items():
         cells = [f"{g[k][1]:g} [{g[k][0]:g}, {g[k][2]:g}]" if g[k] else "—" for k in KEYS]
         print(f"| {name} | {g['n']} | " + " | ".join(cells) + " |")
+    grasp = grasp_summary([r for r in rows if r["started_ood"]])
+    summary["grasps"] = grasp
+    print(
+        f"\nrecovery grasps (OOD starts): {grasp['closes']} close commands, {grasp['held']} held; "
+        f"hand-to-handle cm at a held close {grasp['held_handle_cm']}, at one that did not hold "
+        f"{grasp['missed_handle_cm']} (p25, median, p75); horizontal / vertical parts held "
+        f"{grasp.get('held_xy_cm')} / {grasp.get('held_dz_cm')}, missed {grasp.get('missed_xy_cm')} / "
+        f"{grasp.get('missed_dz_cm')}; hand motion while closing held {grasp.get('held_move_cm')}, missed "
+        f"{grasp.get('missed_move_cm')}; first held step {grasp['first_hold_step']} "
+        f"(never held in {grasp['never_held']} episodes); closes before the first that held "
+        f"{grasp['closes_before_hold']}"
+    )
     print("\nfailures: seed, ending, entries, grasps, lift, tilt, to peg, to ID box, eef-handle, tail")
     for r in rows:
         if r["ending"] != "solved":

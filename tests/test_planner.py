@@ -1,7 +1,13 @@
 import pytest
 import torch
 
-from lerobot_ocr.planner import RecoveryPlanner, carry_along_plan, plan_keypoint_trajectory, recovery_delay
+from lerobot_ocr.planner import (
+    RecoveryPlanner,
+    carry_along_plan,
+    plan_keypoint_trajectory,
+    pull_toward,
+    recovery_delay,
+)
 
 
 def test_delay_regions():
@@ -111,3 +117,11 @@ def test_carry_along_plan_shifts_the_position_and_keeps_rotation_and_gripper():
         carry_along_plan(plan, last[:, :2])
     with pytest.raises(ValueError, match=r"Need plan \(R, L, K, D\)"):
         carry_along_plan(plan[0], last)
+
+
+def test_pull_toward_moves_only_the_horizontal_position():
+    actions = torch.tensor([[[0.0, 0.0, 5.0, 1.0], [10.0, -10.0, 6.0, -1.0]]])  # (1, 2, 4): x, y, z, gripper
+    out = pull_toward(actions, torch.tensor([[10.0, 10.0, 100.0]]), 0.2)
+    torch.testing.assert_close(out[0, :, :2], torch.tensor([[2.0, 2.0], [10.0, -6.0]]))
+    torch.testing.assert_close(out[..., 2:], actions[..., 2:])  # height and gripper kept
+    torch.testing.assert_close(pull_toward(actions, torch.zeros(1, 3), 0.0), actions)

@@ -328,6 +328,9 @@ def test_the_square_failure_replay_reproduces_and_reads_a_recorded_episode(tmp_p
     assert r1["nut_moved_cm"] < 0.5 and abs(r1["nut_lift_cm"]) < 0.5 and r1["max_lift_cm"] < 0.5
     assert r1["nut_tilt_deg"] < 5.0 and r1["tail_motion_cm"] < 0.5 and r1["nut_id_box_cm"] > 10.0  # OOD start
     assert r0["max_lift_cm"] > 5.0  # the expert lifted the nut over the peg
+    # the expert's grasp holds at the handle; the still row never closes or holds
+    assert len(r0["close_handle_cm"]) == closes and r0["close_held"][0] and r0["close_handle_cm"][0] < 3.0
+    assert 0 < r0["first_hold_step"] < 60 and (r1["close_held"], r1["first_hold_step"]) == ([], -1)
     assert r1["last_score"] == -20.0 and r1["steps"] == t
 
 
@@ -345,6 +348,24 @@ def test_square_failure_endings_grasps_and_tilt():
     assert square_failures.grasps(gripper, np.ones(8, bool)) == 3
     assert square_failures.grasps(gripper, np.array([0, 0, 0, 0, 1, 1, 1, 1], bool)) == 2
     assert square_failures.grasps(-gripper, np.ones(8, bool)) == 3  # closed from step 0: that counts
+    # grasp events: the close at step 1 lifts the nut at step 3 with the hand at the handle (held); the
+    # close at step 6 comes 5 cm away and lifts nothing
+    z = np.array([0.8, 0.8, 0.8, 0.82, 0.82, 0.8, 0.8, 0.8, 0.8])
+    reach = np.array([0.01, 0.01, 0.01, 0.01, 0.01, 0.05, 0.05, 0.05, 0.05])
+    ev = square_failures.grasp_events(gripper, np.array([1, 1, 1, 1, 0, 0, 1, 1], bool), z, reach, 0.8)
+    assert ev == {"close_handle_cm": [1.0, 5.0], "close_held": [True, False], "first_hold_step": 3}
+    offset = np.zeros((9, 3))
+    offset[1], offset[6] = [0.006, 0.008, 0.0], [0.0, 0.03, 0.04]  # 1 cm level; 3 cm aside and 4 cm above
+    eef = np.zeros((9, 3))
+    eef[2:, 0] = 0.02  # the hand moves 2 cm just after the first close, then stays
+    ev_split = square_failures.grasp_events(
+        gripper, np.array([1, 1, 1, 1, 0, 0, 1, 1], bool), z, reach, 0.8, offset, eef
+    )
+    assert ev_split["close_xy_cm"] == [1.0, 3.0] and ev_split["close_dz_cm"] == [0.0, 4.0]
+    assert ev_split["close_move_cm"] == [2.0, 0.0]
+    summary = square_failures.grasp_summary([ev, {**ev, "close_held": [False, False], "first_hold_step": -1}])
+    assert (summary["closes"], summary["held"], summary["never_held"]) == (4, 1, 1)
+    assert summary["held_handle_cm"] == [1.0, 1.0, 1.0] and summary["closes_before_hold"] == [0.0, 0.0, 0.0]
     box = ((-0.115, -0.11), (0.11, 0.225))
     assert square_failures.box_distance_cm(np.array([-0.112, 0.2]), *box) == 0.0
     assert square_failures.box_distance_cm(np.array([-0.11, 0.08]), *box) == pytest.approx(3.0)

@@ -175,3 +175,11 @@ def carry_along_plan(plan: torch.Tensor, last_action: torch.Tensor) -> torch.Ten
     out = last_action[:, None].repeat(1, plan.shape[1], 1)
     out[..., :d] += shift
     return out
+
+
+def pull_toward(actions: torch.Tensor, target: torch.Tensor, fraction: float, dims: int = 2) -> torch.Tensor:
+    """Actions (R, L, A) whose first `dims` position entries move `fraction` of the way toward target
+    (R, >=dims) (world frame, object units); the other entries are kept. PROBE (grasp_pull)."""
+    out = actions.clone()
+    out[..., :dims] += fraction * (target[:, None, :dims].to(out) - out[..., :dims])
+    return out

@@ -53,7 +53,7 @@ from lerobot_ocr.inverse_policy import KeypointInversePolicy
 from lerobot_ocr.joint_density import JointKeypointDensity
 from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
 from lerobot_ocr.manifold import KeypointManifold, RecoveryOutput
-from lerobot_ocr.planner import RecoveryPlanner, carry_along_plan
+from lerobot_ocr.planner import RecoveryPlanner, carry_along_plan, pull_toward
 from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
 from lerobot_ocr.policies.ocr_joint.processor_ocr_joint import make_ocr_joint_pre_post_processors
 from lerobot_ocr.policies.ocr_joint.switch import SwitchState, advance, decide, needs_check
@@ -531,6 +531,12 @@ class OcrJointPolicy(PreTrainedPolicy):
                 noise=None if noise is None else noise[sampled.to(noise.device)],
                 max_delay=max_delay,
             )
+            if cfg.grasp_pull > 0:
+                frames = obs.frames[sub]
+                d = frames.shape[-1] - 1
+                point = torch.as_tensor(cfg.grasp_point, dtype=frames.dtype, device=frames.device)
+                target = frames[:, :d, :d] @ point + frames[:, :d, d]
+                actions = pull_toward(actions, target, cfg.grasp_pull)
             self._chunk[sub] = actions[:, :n].to(self._chunk)
             pushes[sampled] = (plan[:, n - 1] != plan[:, 0]).flatten(1).any(-1).to(idx.device)
         if stall:

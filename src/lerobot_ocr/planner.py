@@ -183,3 +183,42 @@ def pull_toward(actions: torch.Tensor, target: torch.Tensor, fraction: float, di
     out = actions.clone()
     out[..., :dims] += fraction * (target[:, None, :dims].to(out) - out[..., :dims])
     return out
+
+
+def hold_grasp(
+    actions: torch.Tensor,
+    prev_closed: torch.Tensor,
+    carried_hold: torch.Tensor,
+    carried_pose: torch.Tensor,
+    hold: int,
+    gripper_index: int = -1,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """PROBE (grasp_hold): let the fingers close before the hand moves, as the demos do.
+
+    actions (R, n, A): one executed chunk per row; prev_closed (R,) bool: the row's previous executed
+    action closed the gripper; carried_hold (R,) steps of a hold left over from the row's last chunk and
+    carried_pose (R, A) its action. The first close command (action[gripper_index] > 0) that follows an
+    open one is repeated for the next `hold` steps. Returns the actions, the (R,) steps of hold that run
+    past the chunk's end, and the (R, A) held actions.
+    """
+    out = actions.clone()
+    n = out.shape[1]
+    left = torch.zeros(len(out), dtype=torch.long, device=out.device)
+    pose = carried_pose.clone().to(out)
+    for r in range(len(out)):
+        start = min(int(carried_hold[r]), n)
+        if start:
+            out[r, :start] = pose[r]
+            left[r] = int(carried_hold[r]) - start
+            if left[r]:
+                continue
+        closed = out[r, :, gripper_index] > 0
+        before = torch.cat([prev_closed[r : r + 1].to(closed), closed[:-1]])
+        onsets = (closed & ~before).nonzero().flatten()
+        onsets = onsets[onsets >= start]
+        if len(onsets):
+            k = int(onsets[0])
+            pose[r] = out[r, k]
+            out[r, k + 1 : k + 1 + hold] = out[r, k]
+            left[r] = max(0, k + 1 + hold - n)
+    return out, left, pose

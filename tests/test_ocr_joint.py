@@ -1,7 +1,5 @@
 """ocr_joint on tiny data: switch per row, base history, bad input, save/load, a second base type."""
 
-import math
-
 import numpy as np
 import pytest
 import torch
@@ -482,47 +480,3 @@ def test_a_held_object_is_carried_along_the_plan(diffusion_base, converted_datas
 def test_carry_needs_a_gripper_entry_in_the_action(diffusion_base, converted_dataset):
     with pytest.raises(ValueError, match="is not a gripper entry of the 2-dim action"):
         make_joint(diffusion_base, converted_dataset, carry_tolerance=0.005)
-
-
-def test_grasp_pull_moves_sampled_recovery_actions_toward_the_grasp_point(
-    diffusion_base, converted_dataset, monkeypatch
-):
-    """PROBE --policy.grasp_pull: each sampled recovery action's (x, y) moves that fraction of the way to
-    the grasp point (object frame) placed in the world by the current object pose."""
-    horizon = TINY_OCR["horizon"]
-    joint = make_joint(diffusion_base, converted_dataset, grasp_point=[10.0, 0.0], grasp_pull=0.5)
-
-    def sample(plan, state, frames, noise=None):
-        return state[:, None].expand(-1, horizon, -1).clone()  # target: where the end effector is
-
-    monkeypatch.setattr(joint.inverse, "sample", sample)
-    joint.reset()
-    x, y, theta = OOD_POSE
-    action = joint.select_action(observation([OOD_POSE], [[300.0, 100.0]]))
-    point = torch.tensor([x + 10.0 * math.cos(theta), y + 10.0 * math.sin(theta)])
-    torch.testing.assert_close(action[0], 0.5 * (torch.tensor([300.0, 100.0]) + point), rtol=1e-5, atol=1e-3)
-
-
-def test_grasp_hold_keeps_the_hand_still_while_the_gripper_closes(
-    diffusion_base, converted_dataset, monkeypatch
-):
-    """PROBE --policy.grasp_hold: a sampled recovery chunk that closes the gripper (open before) repeats
-    the closing action for grasp_hold steps, on into the row's next chunk."""
-    horizon = TINY_OCR["horizon"]
-    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=4)
-    joint.config.gripper_action_index, joint.config.grasp_hold = -1, 3  # Push-T's y entry as the gripper
-    ramp = torch.tensor([[0.0, -1.0], [1.0, -1.0], [2.0, 1.0], [3.0, 1.0]])  # closes at step 2 while moving
-
-    def sample(plan, state, frames, noise=None):
-        out = torch.zeros(len(plan), horizon, 2)
-        out[:, :4] = ramp
-        out[:, 4:] = ramp[-1]
-        return out
-
-    monkeypatch.setattr(joint.inverse, "sample", sample)
-    joint.reset()
-    got = [joint.select_action(observation([OOD_POSE], [[300.0, 100.0]]))[0].tolist() for _ in range(6)]
-    # chunk 1: 0, 1, then the close at x = 2 held (3 steps: 1 in this chunk, 2 in the next)
-    assert got[:4] == [[0.0, -1.0], [1.0, -1.0], [2.0, 1.0], [2.0, 1.0]]
-    # chunk 2 starts with the 2 owed steps; its own close at step 2 follows a closed action: no new hold
-    assert got[4:] == [[2.0, 1.0], [2.0, 1.0]]

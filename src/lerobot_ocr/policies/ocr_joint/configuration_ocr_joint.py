@@ -90,14 +90,6 @@ class OcrJointConfig(PreTrainedConfig):
             position actions (`action_frame` "pose:*" or "point"). Default None (off); the shipped
             Square config 0.005 (5 mm): Square joint OOD 0.49 -> 0.645 on 200 paired starts. `select_action`
             only. Beyond the paper (benchmarks/EXPERIMENTS.md, "Carrying a held nut, adopted").
-        grasp_point / grasp_pull: PROBE. Each sampled recovery action's horizontal (world x, y)
-            position is moved the fraction grasp_pull of the way toward grasp_point (object frame,
-            object units) mapped to the world by the current object pose; the reference's real-robot
-            rule pulls 1/5 toward the object. Default off.
-        grasp_hold: PROBE. After a sampled recovery action closes the gripper (open before), that action
-            is repeated for grasp_hold steps (across the chunk's end), so the fingers close before the
-            hand moves (the scripted demos hold 10 steps). Needs carry_tolerance's gripper_action_index.
-            Default 0 (off).
         gripper_action_index: the action entry that commands the gripper, read as closed when > 0
             (robosuite's and the Franka robot's -1 open / +1 close). Default -1 (the last).
     Inverse policy: LeRobot's diffusion U-Net (`down_dims`, ...), DDIM with `num_inference_steps`
@@ -141,9 +133,6 @@ class OcrJointConfig(PreTrainedConfig):
     stall_delay: int = 4
     carry_tolerance: float | None = None
     gripper_action_index: int = -1
-    grasp_point: list[float] | None = None
-    grasp_pull: float = 0.0
-    grasp_hold: int = 0
 
     # Keypoint inverse policy (LeRobot's diffusion U-Net).
     down_dims: tuple[int, ...] = (256, 512, 1024)
@@ -226,13 +215,6 @@ class OcrJointConfig(PreTrainedConfig):
                 "--policy.carry_tolerance shifts absolute end-effector position actions, but "
                 "action_frame='none' says the actions are not positions; use it with action_frame "
                 "'point' or 'pose:<rotation>' only."
-            )
-        if self.grasp_hold < 0:
-            raise ValueError(f"--policy.grasp_hold must be >= 0 steps, got {self.grasp_hold}.")
-        if not 0.0 <= self.grasp_pull < 1.0 or (self.grasp_pull > 0 and self.grasp_point is None):
-            raise ValueError(
-                f"--policy.grasp_pull must be in [0, 1) and needs --policy.grasp_point (the demos' "
-                f"end-effector position at the grasp, object frame), got {self.grasp_pull}."
             )
         if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:
             raise ValueError(

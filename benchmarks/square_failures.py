@@ -12,7 +12,9 @@ distance to the square peg and to the ID start box (cm), how far the end effecto
 handle, and how far the nut moved over the last 100 steps. From the records: how the episode ended
 (solved; never handed back; handed back, then ended in a later recovery; ended on the base), the
 recovery entries, how often the gripper closed while recovering (grasps and re-grasps), and the
-manifold's last recorded score.
+manifold's last recorded score. The recovery's grasps: at each close command sent while recovering, the
+hand-to-handle distance (horizontal and vertical), how far the hand moved while the fingers closed and
+whether the grasp held; and the step at which the nut is first held.
 No network runs. Prints a table per ending and one line per failure; writes `--out` (JSON) if given.
 """
 

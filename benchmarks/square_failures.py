@@ -68,17 +68,16 @@ def grasp_events(
     end effector minus the handle (m, world), each close's horizontal and vertical parts (cm) too; with
     `eef` (n+1, 3), how far (cm) the end effector moved in the CLOSING steps after each close."""
     n = len(gripper)
-    closing = (gripper > 0) & (np.r_[-1.0, gripper[:-1]] <= 0) & recovering
+    closes = close_steps(gripper, recovering)
     near = eef_handle[1:] <= HELD_NEAR  # after step t
     distances, held = [], []
-    for t in np.nonzero(closing)[0]:
+    for t in closes:
         window = slice(t, min(n, t + HOLD_WINDOW))
         rose = nut_z[1:][window] - nut_z[t] >= HELD_LIFT
         distances.append(round(float(100 * eef_handle[t]), 2))
         held.append(bool((rose & near[window] & (gripper[window] > 0)).any()))
     holding = (nut_z[1:] - rest_z >= HELD_LIFT) & near & (gripper > 0)
     first = np.nonzero(holding)[0]
-    closes = np.nonzero(closing)[0]
     split = {}
     if offset is not None:
         split = {
@@ -97,11 +96,15 @@ def grasp_events(
     }
 
 
+def close_steps(gripper: np.ndarray, recovering: np.ndarray) -> np.ndarray:
+    """The steps of close commands sent while recovering: where the (n,) gripper command turns > 0 from
+    <= 0 (the gripper starts open, so a close at step 0 counts) and the (n,) mode is recovering."""
+    return np.nonzero((gripper > 0) & (np.r_[-1.0, gripper[:-1]] <= 0) & recovering)[0]
+
+
 def grasps(gripper: np.ndarray, recovering: np.ndarray) -> int:
-    """Close commands sent while recovering: steps whose (n,) gripper command turns > 0 from <= 0 (the
-    gripper starts open, so a close at step 0 counts)."""
-    closing = (gripper > 0) & (np.r_[-1.0, gripper[:-1]] <= 0)
-    return int((closing & recovering).sum())
+    """How many close commands were sent while recovering (`close_steps`)."""
+    return len(close_steps(gripper, recovering))
 
 
 def tilt_degrees(quat_wxyz: np.ndarray) -> float:

@@ -9,13 +9,16 @@ Runs the eval with the benchmarks' protocol (`lerobot_ocr.pipeline.eval_args`: s
 sync envs on CPU, the task's episode cap and both budgets: 960-step Push-T episodes, success within 400
 steps and within 60 decisions; Square: 400 steps for a base, 1080 for ocr_joint, success within 400 steps
 and within 30 calls of the reference),
-then adds the run to `benchmarks/results/probes.json`
+then adds the run to `benchmarks/results/probes.json`, keeps its per-episode outcomes (a few KB, with the
+checkpoint's digest and the seeds) in `benchmarks/results/probe_episodes/<name>.json`,
 and rewrites the "Probes" section of `benchmarks/EXPERIMENTS.md` from it: one row per probe with its
 change, success rate and 95% interval, its baseline (an earlier probe by name, same seeds) and whether the
 change lies outside the baseline's interval, the only case in which it may be adopted. Arguments after
 `--` go to lerobot-eval unchanged (`--policy.<field>=…`, `--env.<field>=…`). A chain's finished cell
 can stand as the baseline without running again: `--from-cell outputs/<chain>/eval_joint_ood` (checked
-to be of `--checkpoint` and `--region` under this protocol).
+to be of `--checkpoint` and `--region` under this protocol). With a `--baseline` whose kept outcomes are
+of the same checkpoint bytes, it also prints the paired comparison (`paired.py`): a chain rebuilt on the
+same CPU model gives the same bytes, so a later session pairs with a recorded baseline without running it.
 """
 
 from __future__ import annotations
@@ -24,18 +27,18 @@ import argparse
 import datetime as dt
 import json
 import os
-import platform
 import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path[:0] = [str(HERE), str(REPO / "src")]
-from results_md import update_section  # noqa: E402
+from results_md import machine, update_section  # noqa: E402
 
 from lerobot_ocr.pipeline import TASKS, clear_for_resume, eval_args, run  # noqa: E402
 
 LEDGER = HERE / "results" / "probes.json"
+ARCHIVE = HERE / "results" / "probe_episodes"
 EXPERIMENTS = HERE / "EXPERIMENTS.md"
 TASKS_BY_ENV = {task.env_type: task for task in TASKS.values()}
 RENDER_ARGS = {"square_ocr": ["--env.visualization_size=64"]}  # a cheaper rendered first batch
@@ -127,6 +130,30 @@ def cell_command(
     return cmd
 
 
+def keep_episodes(name: str, run_dir: Path, checkpoint: Path, archive: Path = ARCHIVE) -> Path | None:
+    """Write `<archive>/<name>.json`: the run's `episodes.json` with its seeds (from the batch records),
+    the checkpoint's digest (`folder_digest`) and the machine, atomically; None when the run wrote no
+    episodes.json (not an eval of ours). `paired.py` reads the file as it reads a run folder."""
+    from lerobot_ocr.eval_resume import folder_digest, recorded_metas
+
+    source = run_dir / "episodes.json"
+    if not source.exists():
+        return None
+    record = {
+        "name": name,
+        "checkpoint_sha256": folder_digest(checkpoint),
+        "machine": machine(),
+        "seeds": [s for m in recorded_metas(run_dir) for s in (m.get("seeds") or [])],
+        "episodes": json.loads(source.read_text()),
+    }
+    archive.mkdir(parents=True, exist_ok=True)
+    path = archive / f"{name}.json"
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(record) + "\n")
+    tmp.replace(path)
+    return path
+
+
 def main() -> None:
     from lerobot_ocr.cli import quiet_known_warnings
 
@@ -195,12 +222,13 @@ def main() -> None:
             "change": args.change,
             "baseline": args.baseline,
             "command": " ".join(cmd),
-            "machine": f"{platform.machine()}, python {platform.python_version()}",
+            "machine": machine(),
             **result,
         }
     )
     LEDGER.write_text(json.dumps(probes, indent=2) + "\n")
     update_section("Probes", render(probes), path=EXPERIMENTS)
+    kept = keep_episodes(args.name, out, checkpoint)
     print(
         render(
             probes[-1:]
@@ -208,6 +236,14 @@ def main() -> None:
             else [p for p in probes if p["name"] in (args.baseline, args.name)]
         )
     )
+    base_kept = ARCHIVE / f"{args.baseline}.json"
+    if args.baseline and kept and base_kept.exists():
+        import paired
+
+        try:
+            print(paired.table(paired.compare(base_kept, kept)))
+        except ValueError as e:  # another checkpoint or other seeds: no paired test
+            print(f"No paired comparison with {args.baseline}: {e}")
 
 
 if __name__ == "__main__":

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import platform
 import re
 from pathlib import Path
 
@@ -27,3 +29,13 @@ def update_section(title: str, body: str, path: Path = RESULTS, first: bool = Fa
     tmp = path.with_suffix(".tmp")
     tmp.write_text(text.rstrip("\n") + "\n")
     tmp.replace(path)
+
+
+def machine() -> str:
+    """Architecture, CPU model, cores and Python, for a result file (a recipe is bit-for-bit repeatable on
+    one CPU model, not across them)."""
+    cpuinfo = Path("/proc/cpuinfo")
+    lines = cpuinfo.read_text().splitlines() if cpuinfo.exists() else []
+    models = [line.split(":", 1)[1].strip() for line in lines if line.startswith("model name")]
+    model = models[0] if models else platform.processor() or "cpu"
+    return f"{platform.machine()}, {model}, {os.cpu_count()} cores, python {platform.python_version()}"

@@ -30,7 +30,6 @@ import argparse
 import datetime as dt
 import json
 import math
-import platform
 import sys
 import time
 from pathlib import Path
@@ -288,17 +287,6 @@ def section(result: dict) -> str:
     return "\n".join(lines)
 
 
-def machine() -> str:
-    """Architecture, CPU model, cores and Python, for the result file."""
-    import os
-
-    cpuinfo = Path("/proc/cpuinfo")
-    lines = cpuinfo.read_text().splitlines() if cpuinfo.exists() else []
-    models = [line.split(":", 1)[1].strip() for line in lines if line.startswith("model name")]
-    model = models[0] if models else platform.processor() or "cpu"
-    return f"{platform.machine()}, {model}, {os.cpu_count()} cores, python {platform.python_version()}"
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workdir", default="outputs/square_ocr_cpu", help="the chain's work dir")
@@ -309,7 +297,7 @@ def main() -> None:
     parser.add_argument("--batch", type=int, default=10)
     parser.add_argument("--out", default=str(HERE / "results" / "square_oracle_recovery.json"))
     args = parser.parse_args()
-    from results_md import update_section
+    from results_md import machine, update_section
 
     workdir = Path(args.workdir)
     cfg = json.loads((REPO / "configs" / "policy" / "ocr_joint_square.json").read_text())["policy"]

@@ -413,6 +413,46 @@ def test_paired_comparison_counts_discordant_episodes_and_gives_the_exact_mcnema
         paired.compare(a, tmp_path)
 
 
+def test_kept_probe_outcomes_pair_later_only_with_the_same_checkpoint(tmp_path):
+    """probe.py keeps each probe's episodes.json with its seeds and checkpoint digest; paired.py pairs two
+    kept files as it pairs run folders, and refuses files of two checkpoints."""
+    import json
+
+    import numpy as np
+    import paired
+
+    ckpt = tmp_path / "ckpt"
+    ckpt.mkdir()
+    (ckpt / "model.safetensors").write_bytes(b"weights")
+
+    def run(name, success_step, seeds):
+        d = tmp_path / name
+        (d / "batches").mkdir(parents=True)
+        meta = json.dumps({"key": "k", "batch": 0, "rows": len(seeds), "seeds": seeds})
+        np.savez(d / "batches" / "batch_00000.npz", meta=np.asarray(meta))
+        episodes = {"success_step": success_step, "decisions_at_success": success_step, "step_budget": 400}
+        (d / "episodes.json").write_text(json.dumps(episodes))
+        return d
+
+    archive = tmp_path / "kept"
+    base = probe.keep_episodes("base", run("base", [100, -1, 300], [7, 8, 9]), ckpt, archive)
+    change = probe.keep_episodes("change", run("change", [100, 200, -1], [7, 8, 9]), ckpt, archive)
+    record = json.loads(base.read_text())
+    assert record["seeds"] == [7, 8, 9] and len(record["checkpoint_sha256"]) == 64
+    assert not list(archive.glob("*.tmp"))
+    result = paired.compare(base, change)
+    assert (result["strict"]["only_a"], result["strict"]["only_b"]) == (1, 1)
+    assert result == paired.compare(tmp_path / "base", tmp_path / "change")  # as the run folders pair
+    assert "| strict | 3 |" in paired.table(result)
+    with pytest.raises(ValueError, match="other episodes"):
+        paired.compare(base, probe.keep_episodes("seeds", run("seeds", [1, 2, 3], [1, 2, 3]), ckpt, archive))
+    (ckpt / "model.safetensors").write_bytes(b"retrained")
+    other = probe.keep_episodes("other", run("other", [100, 200, 300], [7, 8, 9]), ckpt, archive)
+    with pytest.raises(ValueError, match="other checkpoints"):
+        paired.compare(base, other)
+    assert probe.keep_episodes("none", tmp_path / "ckpt", ckpt, archive) is None  # no episodes.json
+
+
 def test_the_square_oracle_counts_the_joint_cells_budgets():
     """`benchmarks/square_oracle_recovery.py`: a recovery step is 1/36 of a reference call, a base call 8
     steps, 30 calls; the step budgets add both phases' steps."""

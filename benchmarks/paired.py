@@ -5,7 +5,7 @@
 Each run is an `--output_dir` of `lerobot-ocr eval` (a probe or a chain cell) with its `episodes.json`,
 or a probe's kept outcomes (`benchmarks/results/probe_episodes/<name>.json`, written by `probe.py`: they
 outlive `outputs/`); both must have run the same seeds (`--seed`, same episode count), and kept outcomes
-of two checkpoints (another digest) are refused. Per budget the runs report (strict:
+of two trainings (another digest of the weights) are refused. Per budget the runs report (strict:
 within the step budget; reference budget: within the reference's decisions; whole episode), it prints
 the success rates, the episodes solved only by the first and only by the second run, and the exact
 two-sided McNemar p-value of those discordant counts (a binomial test with p = 1/2). The adopt rule
@@ -60,9 +60,9 @@ def solved_flags(run: Path) -> tuple[list[int] | None, dict[str, list[bool]]]:
     return (seeds if len(seeds) == len(steps) else None), flags
 
 
-def checkpoint_digest(run: Path) -> str | None:
-    """The checkpoint digest kept with a probe's outcomes (None for a run folder)."""
-    return json.loads(run.read_text()).get("checkpoint_sha256") if run.is_file() else None
+def weights_digest(run: Path) -> str | None:
+    """The digest of the weights kept with a probe's outcomes (None for a run folder)."""
+    return json.loads(run.read_text()).get("weights_sha256") if run.is_file() else None
 
 
 def compare(a: Path, b: Path) -> dict[str, dict]:
@@ -70,13 +70,13 @@ def compare(a: Path, b: Path) -> dict[str, dict]:
 
     Raises:
         ValueError: the runs did not run the same episodes (seeds or count), or kept outcomes of two
-            checkpoints.
+            trainings.
     """
-    digests = {checkpoint_digest(a), checkpoint_digest(b)} - {None}
+    digests = {weights_digest(a), weights_digest(b)} - {None}
     if len(digests) > 1:
         raise ValueError(
-            f"{a} and {b} ran other checkpoints (their digests differ): pair runs of one policy; a chain "
-            "rebuilt on another CPU model gives other bytes."
+            f"{a} and {b} ran other weights (their digests differ): pair runs of one training; a chain "
+            "rebuilt on another CPU model trains other weights."
         )
     seeds_a, fa = solved_flags(a)
     seeds_b, fb = solved_flags(b)

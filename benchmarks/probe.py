@@ -10,15 +10,15 @@ sync envs on CPU, the task's episode cap and both budgets: 960-step Push-T episo
 steps and within 60 decisions; Square: 400 steps for a base, 1080 for ocr_joint, success within 400 steps
 and within 30 calls of the reference),
 then adds the run to `benchmarks/results/probes.json`, keeps its per-episode outcomes (a few KB, with the
-checkpoint's digest and the seeds) in `benchmarks/results/probe_episodes/<name>.json`,
+digest of the checkpoint's weights and the seeds) in `benchmarks/results/probe_episodes/<name>.json`,
 and rewrites the "Probes" section of `benchmarks/EXPERIMENTS.md` from it: one row per probe with its
 change, success rate and 95% interval, its baseline (an earlier probe by name, same seeds) and whether the
 change lies outside the baseline's interval, the only case in which it may be adopted. Arguments after
 `--` go to lerobot-eval unchanged (`--policy.<field>=…`, `--env.<field>=…`). A chain's finished cell
 can stand as the baseline without running again: `--from-cell outputs/<chain>/eval_joint_ood` (checked
 to be of `--checkpoint` and `--region` under this protocol). With a `--baseline` whose kept outcomes are
-of the same checkpoint bytes, it also prints the paired comparison (`paired.py`): a chain rebuilt on the
-same CPU model gives the same bytes, so a later session pairs with a recorded baseline without running it.
+of the same weights, it also prints the paired comparison (`paired.py`): a chain rebuilt on the same CPU
+model trains the same weights, so a later session pairs with a kept baseline without running it.
 """
 
 from __future__ import annotations
@@ -130,18 +130,39 @@ def cell_command(
     return cmd
 
 
+def weights_digest(checkpoint: Path) -> str:
+    """sha256 hex of a checkpoint's `*.safetensors` files (names and bytes; ocr_joint's `base/` included):
+    the trained networks, whatever the config says (an option given on the command line or written in
+    config.json is the probe's change, not another checkpoint).
+
+    Raises:
+        ValueError: no weights under `checkpoint`.
+    """
+    import hashlib
+
+    files = sorted(checkpoint.rglob("*.safetensors"))
+    if not files:
+        raise ValueError(f"{checkpoint} holds no *.safetensors weights: pass a pretrained_model folder.")
+    digest = hashlib.sha256()
+    for f in files:
+        digest.update(str(f.relative_to(checkpoint)).encode())
+        digest.update(f.read_bytes())
+    return digest.hexdigest()
+
+
 def keep_episodes(name: str, run_dir: Path, checkpoint: Path, archive: Path = ARCHIVE) -> Path | None:
     """Write `<archive>/<name>.json`: the run's `episodes.json` with its seeds (from the batch records),
-    the checkpoint's digest (`folder_digest`) and the machine, atomically; None when the run wrote no
-    episodes.json (not an eval of ours). `paired.py` reads the file as it reads a run folder."""
-    from lerobot_ocr.eval_resume import folder_digest, recorded_metas
+    the digest of the checkpoint's weights (`weights_digest`) and the machine, atomically; None when the
+    run wrote no episodes.json (not an eval of ours). `paired.py` reads the file as it reads a run
+    folder."""
+    from lerobot_ocr.eval_resume import recorded_metas
 
     source = run_dir / "episodes.json"
     if not source.exists():
         return None
     record = {
         "name": name,
-        "checkpoint_sha256": folder_digest(checkpoint),
+        "weights_sha256": weights_digest(checkpoint),
         "machine": machine(),
         "seeds": [s for m in recorded_metas(run_dir) for s in (m.get("seeds") or [])],
         "episodes": json.loads(source.read_text()),
@@ -242,7 +263,7 @@ def main() -> None:
 
         try:
             print(paired.table(paired.compare(base_kept, kept)))
-        except ValueError as e:  # another checkpoint or other seeds: no paired test
+        except ValueError as e:  # other weights or other seeds: no paired test
             print(f"No paired comparison with {args.baseline}: {e}")
 
 

@@ -477,6 +477,33 @@ def test_a_held_object_is_carried_along_the_plan(diffusion_base, converted_datas
     assert joint.ocr_stats()["shortened_plans"] == 1
 
 
-def test_carry_needs_a_gripper_entry_in_the_action(diffusion_base, converted_dataset):
+def test_carry_and_grasp_hold_need_a_gripper_entry_in_the_action(diffusion_base, converted_dataset):
     with pytest.raises(ValueError, match="is not a gripper entry of the 2-dim action"):
         make_joint(diffusion_base, converted_dataset, carry_tolerance=0.005)
+    with pytest.raises(ValueError, match="is not a gripper entry of the 2-dim action"):
+        make_joint(diffusion_base, converted_dataset, grasp_hold=10)
+
+
+def test_grasp_hold_keeps_the_hand_still_while_the_gripper_closes(
+    diffusion_base, converted_dataset, monkeypatch
+):
+    """--policy.grasp_hold: a sampled recovery chunk that closes the gripper (open before) repeats
+    the closing action for grasp_hold steps, on into the row's next chunk."""
+    horizon = TINY_OCR["horizon"]
+    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=4)
+    joint.config.gripper_action_index, joint.config.grasp_hold = -1, 3  # Push-T's y entry as the gripper
+    ramp = torch.tensor([[0.0, -1.0], [1.0, -1.0], [2.0, 1.0], [3.0, 1.0]])  # closes at step 2 while moving
+
+    def sample(plan, state, frames, noise=None):
+        out = torch.zeros(len(plan), horizon, 2)
+        out[:, :4] = ramp
+        out[:, 4:] = ramp[-1]
+        return out
+
+    monkeypatch.setattr(joint.inverse, "sample", sample)
+    joint.reset()
+    got = [joint.select_action(observation([OOD_POSE], [[300.0, 100.0]]))[0].tolist() for _ in range(6)]
+    # chunk 1: 0, 1, then the close at x = 2 held (3 steps: 1 in this chunk, 2 in the next)
+    assert got[:4] == [[0.0, -1.0], [1.0, -1.0], [2.0, 1.0], [2.0, 1.0]]
+    # chunk 2 starts with the 2 owed steps; its own close at step 2 follows a closed action: no new hold
+    assert got[4:] == [[2.0, 1.0], [2.0, 1.0]]

@@ -1,7 +1,13 @@
 import pytest
 import torch
 
-from lerobot_ocr.planner import RecoveryPlanner, carry_along_plan, plan_keypoint_trajectory, recovery_delay
+from lerobot_ocr.planner import (
+    RecoveryPlanner,
+    carry_along_plan,
+    hold_grasp,
+    plan_keypoint_trajectory,
+    recovery_delay,
+)
 
 
 def test_delay_regions():
@@ -111,3 +117,26 @@ def test_carry_along_plan_shifts_the_position_and_keeps_rotation_and_gripper():
         carry_along_plan(plan, last[:, :2])
     with pytest.raises(ValueError, match=r"Need plan \(R, L, K, D\)"):
         carry_along_plan(plan[0], last)
+
+
+def test_hold_grasp_repeats_the_close_action_and_carries_the_rest_over():
+    # (x, gripper) actions: row 0 closes at step 1 while moving; row 1 closes at step 3 (near the end);
+    # row 2 was closed already (no onset); row 3 still owes 2 steps of a hold from its last chunk
+    g = torch.tensor([[-1, 1, 1, 1], [-1, -1, -1, 1], [1, 1, 1, 1], [-1, -1, 1, 1]], dtype=torch.float32)
+    x = torch.arange(4.0).expand(4, 4)
+    actions = torch.stack([x, g], -1)  # (4, 4, 2)
+    prev = torch.tensor([False, False, True, False])
+    carried = torch.tensor([0, 0, 0, 2])
+    pose = torch.zeros(4, 2)
+    pose[3] = torch.tensor([9.0, 1.0])
+    out, left, held = hold_grasp(actions, prev, carried, pose, hold=2)
+    assert out[0, :, 0].tolist() == [0.0, 1.0, 1.0, 1.0] and out[0, 1:, 1].tolist() == [1.0, 1.0, 1.0]
+    assert out[1, :, 0].tolist() == [0.0, 1.0, 2.0, 3.0] and left[1] == 2  # the hold runs into the next chunk
+    torch.testing.assert_close(held[1], torch.tensor([3.0, 1.0]))
+    torch.testing.assert_close(out[2], actions[2])  # closed before: nothing to hold
+    # row 3: the carried (closed) hold first; its own close at step 2 then follows a closed action: no hold
+    assert out[3, :, 0].tolist() == [9.0, 9.0, 2.0, 3.0]
+    assert left[0] == 0 and left[2] == 0 and left[3] == 0
+    # a hold longer than the chunk uses it all and owes the rest
+    out, left, _ = hold_grasp(actions[3:], prev[3:], torch.tensor([6]), pose[3:], hold=2)
+    assert out[0, :, 0].tolist() == [9.0] * 4 and left.tolist() == [2]

@@ -414,8 +414,8 @@ def test_paired_comparison_counts_discordant_episodes_and_gives_the_exact_mcnema
 
 
 def test_kept_probe_outcomes_pair_later_only_with_the_same_checkpoint(tmp_path):
-    """probe.py keeps each probe's episodes.json with its seeds and checkpoint digest; paired.py pairs two
-    kept files as it pairs run folders, and refuses files of two checkpoints."""
+    """probe.py keeps each probe's episodes.json with its seeds and the digest of the checkpoint's weights;
+    paired.py pairs two kept files as it pairs run folders, and refuses files of two trainings."""
     import json
 
     import numpy as np
@@ -438,7 +438,7 @@ def test_kept_probe_outcomes_pair_later_only_with_the_same_checkpoint(tmp_path):
     base = probe.keep_episodes("base", run("base", [100, -1, 300], [7, 8, 9]), ckpt, archive)
     change = probe.keep_episodes("change", run("change", [100, 200, -1], [7, 8, 9]), ckpt, archive)
     record = json.loads(base.read_text())
-    assert record["seeds"] == [7, 8, 9] and len(record["checkpoint_sha256"]) == 64
+    assert record["seeds"] == [7, 8, 9] and len(record["weights_sha256"]) == 64
     assert not list(archive.glob("*.tmp"))
     result = paired.compare(base, change)
     assert (result["strict"]["only_a"], result["strict"]["only_b"]) == (1, 1)
@@ -446,10 +446,14 @@ def test_kept_probe_outcomes_pair_later_only_with_the_same_checkpoint(tmp_path):
     assert "| strict | 3 |" in paired.table(result)
     with pytest.raises(ValueError, match="other episodes"):
         paired.compare(base, probe.keep_episodes("seeds", run("seeds", [1, 2, 3], [1, 2, 3]), ckpt, archive))
+    (ckpt / "config.json").write_text("{}")  # a config is the probe's change: the same weights
+    assert paired.compare(base, probe.keep_episodes("config", tmp_path / "change", ckpt, archive))
     (ckpt / "model.safetensors").write_bytes(b"retrained")
     other = probe.keep_episodes("other", run("other", [100, 200, 300], [7, 8, 9]), ckpt, archive)
-    with pytest.raises(ValueError, match="other checkpoints"):
+    with pytest.raises(ValueError, match="other weights"):
         paired.compare(base, other)
+    with pytest.raises(ValueError, match="no \\*.safetensors"):
+        probe.weights_digest(tmp_path / "base")
     assert probe.keep_episodes("none", tmp_path / "ckpt", ckpt, archive) is None  # no episodes.json
 
 

@@ -73,20 +73,6 @@ def _hash_files(digest, root: Path) -> None:
                 digest.update(block)
 
 
-def folder_digest(path: str | Path) -> str:
-    """sha256 hex of a file's or folder's file names and bytes (what `run_key` hashes of a checkpoint).
-
-    Raises:
-        FileNotFoundError: `path` does not exist.
-    """
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"{path} does not exist: pass a checkpoint folder or file.")
-    digest = hashlib.sha256()
-    _hash_files(digest, path)
-    return digest.hexdigest()
-
-
 def run_key(args: list[str]) -> str:
     """The identity of a run's batches: its arguments (those that change episodes, in order), its
     checkpoint and config file, `RECORD_VERSION` and LeRobot's version.

@@ -175,3 +175,44 @@ def carry_along_plan(plan: torch.Tensor, last_action: torch.Tensor) -> torch.Ten
     out = last_action[:, None].repeat(1, plan.shape[1], 1)
     out[..., :d] += shift
     return out
+
+
+def hold_grasp(
+    actions: torch.Tensor,
+    prev_closed: torch.Tensor,
+    carried_hold: torch.Tensor,
+    carried_pose: torch.Tensor,
+    hold: int,
+    gripper_index: int = -1,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Recovery actions that hold the hand still while the fingers close, as the demos do.
+
+    actions (R, n, A): one executed chunk per row (world frame); prev_closed (R,) bool: the row's
+    previous executed action closed the gripper; carried_hold (R,) steps of a hold left over from the
+    row's last chunk and carried_pose (R, A) its action. The first close command (action[gripper_index]
+    > 0) that follows an open one is repeated for the next `hold` steps. Returns the actions, the (R,)
+    steps of the hold that run past the chunk's end, and the (R, A) held actions. Used by `ocr_joint`'s
+    `grasp_hold`: the reference's real-robot "waiting for grasp" rule (OCR_REFERENCE_CODE_FACTS.md §6);
+    Square, benchmarks/EXPERIMENTS.md "Holding still while the fingers close".
+    """
+    out = actions.clone()
+    n = out.shape[1]
+    left = torch.zeros(len(out), dtype=torch.long, device=out.device)
+    pose = carried_pose.clone().to(out)
+    for r in range(len(out)):
+        start = min(int(carried_hold[r]), n)
+        if start:
+            out[r, :start] = pose[r]
+            left[r] = int(carried_hold[r]) - start
+            if left[r]:
+                continue
+        closed = out[r, :, gripper_index] > 0
+        before = torch.cat([prev_closed[r : r + 1].to(closed), closed[:-1]])
+        onsets = (closed & ~before).nonzero().flatten()
+        onsets = onsets[onsets >= start]
+        if len(onsets):
+            k = int(onsets[0])
+            pose[r] = out[r, k]
+            out[r, k + 1 : k + 1 + hold] = out[r, k]
+            left[r] = max(0, k + 1 + hold - n)
+    return out, left, pose

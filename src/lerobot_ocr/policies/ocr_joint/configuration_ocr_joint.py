@@ -90,6 +90,14 @@ class OcrJointConfig(PreTrainedConfig):
             position actions (`action_frame` "pose:*" or "point"). Default None (off); the shipped
             Square config 0.005 (5 mm): Square joint OOD 0.49 -> 0.645 on 200 paired starts. `select_action`
             only. Beyond the paper (benchmarks/EXPERIMENTS.md, "Carrying a held nut, adopted").
+        grasp_hold: prehensile tasks (steps): after a sampled recovery action closes the gripper (open
+            before), that action is repeated for grasp_hold steps, on into the row's next chunk, so the
+            fingers close before the hand moves (near the object the plan moves at once, and the
+            inverse policy would move the hand while closing; the Square demos hold still 10 steps).
+            Needs a gripper entry (`gripper_action_index`). Default 0 (off); the shipped Square config
+            10: Square joint OOD within the reference budget 0.63 -> 0.77 on 100 starts. `select_action`
+            only. The reference's real-robot "waiting for grasp" rule (OCR_REFERENCE_CODE_FACTS.md §6;
+            benchmarks/EXPERIMENTS.md, "Holding still while the fingers close").
         gripper_action_index: the action entry that commands the gripper, read as closed when > 0
             (robosuite's and the Franka robot's -1 open / +1 close). Default -1 (the last).
     Inverse policy: LeRobot's diffusion U-Net (`down_dims`, ...), DDIM with `num_inference_steps`
@@ -133,6 +141,7 @@ class OcrJointConfig(PreTrainedConfig):
     stall_delay: int = 4
     carry_tolerance: float | None = None
     gripper_action_index: int = -1
+    grasp_hold: int = 0
 
     # Keypoint inverse policy (LeRobot's diffusion U-Net).
     down_dims: tuple[int, ...] = (256, 512, 1024)
@@ -216,6 +225,8 @@ class OcrJointConfig(PreTrainedConfig):
                 "action_frame='none' says the actions are not positions; use it with action_frame "
                 "'point' or 'pose:<rotation>' only."
             )
+        if self.grasp_hold < 0:
+            raise ValueError(f"--policy.grasp_hold must be >= 0 steps, got {self.grasp_hold}.")
         if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:
             raise ValueError(
                 f"--policy.fixed_delay must be in [0, horizon={self.horizon}) or None, got "
@@ -262,7 +273,7 @@ class OcrJointConfig(PreTrainedConfig):
                 f"pose_rotation={self.pose_rotation!r} needs {pose_size(self.pose_rotation)}."
             )
         action_size = self.output_features[ACTION].shape[-1]
-        if self.carry_tolerance is not None:
+        if self.carry_tolerance is not None or self.grasp_hold:
             moved = FrameSpec.parse(self.action_frame).world_size(self.object_dim)  # position (+ rotation)
             index = self.gripper_action_index
             if not -action_size <= index < action_size or index % action_size < moved:
@@ -270,7 +281,8 @@ class OcrJointConfig(PreTrainedConfig):
                     f"--policy.gripper_action_index={index} is not a gripper entry of the {action_size}-dim "
                     f"action (its first {moved} entries are the end-effector target, action_frame="
                     f"{self.action_frame!r}); set it to the gripper command's index, or leave "
-                    "carry_tolerance None (an action without a gripper cannot hold the object)."
+                    "carry_tolerance None and grasp_hold 0 (an action without a gripper cannot hold the "
+                    "object)."
                 )
         size = self.input_features[self.object_pose_key].shape[-1]
         if size != pose_size(self.pose_rotation):

@@ -53,7 +53,7 @@ from lerobot_ocr.inverse_policy import KeypointInversePolicy
 from lerobot_ocr.joint_density import JointKeypointDensity
 from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
 from lerobot_ocr.manifold import KeypointManifold, RecoveryOutput
-from lerobot_ocr.planner import RecoveryPlanner, carry_along_plan
+from lerobot_ocr.planner import RecoveryPlanner, carry_along_plan, hold_grasp
 from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
 from lerobot_ocr.policies.ocr_joint.processor_ocr_joint import make_ocr_joint_pre_post_processors
 from lerobot_ocr.policies.ocr_joint.switch import SwitchState, advance, decide, needs_check
@@ -386,6 +386,8 @@ class OcrJointPolicy(PreTrainedPolicy):
         # planned (`carry_tolerance`)
         self._chunk_ee: torch.Tensor | None = None
         self._chunk_centre: torch.Tensor | None = None
+        self._hold_left: torch.Tensor | None = None  # (B,) steps of a grasp hold still to run (grasp_hold)
+        self._hold_pose: torch.Tensor | None = None  # (B, A) the held action
 
     def _archive_stats(self) -> None:
         if getattr(self, "_scores", None):
@@ -412,6 +414,8 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._chunk = torch.zeros(b, self.config.n_recovery_action_steps, action_dim, device=device)
         self._chunk_keypoints = self._chunk_pushes = None
         self._chunk_ee = self._chunk_centre = None
+        self._hold_left = torch.zeros(b, dtype=torch.long, device=device)
+        self._hold_pose = torch.zeros(b, action_dim, device=device)
         self._unchecked = torch.full(
             (b,), float("nan"), dtype=torch.float64
         )  # the score where none was needed
@@ -508,6 +512,8 @@ class OcrJointPolicy(PreTrainedPolicy):
             plan = self.planner(obs.keypoints[rows_held], vector, None, delay=0)
             last = self._chunk[rows_held, -1].to(plan.dtype)
             self._chunk[rows_held] = carry_along_plan(plan, last)[:, :n].to(self._chunk)
+            if self._hold_left is not None:
+                self._hold_left[rows_held] = 0
             pushes[held] = (plan[:, n - 1] != plan[:, 0]).flatten(1).any(-1).to(idx.device)
         sampled = ~held
         if bool(sampled.any()):
@@ -531,6 +537,17 @@ class OcrJointPolicy(PreTrainedPolicy):
                 noise=None if noise is None else noise[sampled.to(noise.device)],
                 max_delay=max_delay,
             )
+            if cfg.grasp_hold:  # the fingers close before the hand moves on
+                g = cfg.gripper_action_index
+                continuing = self._switch.recovering[sub].to(sub.device)
+                prev = torch.where(continuing, self._chunk[sub, -1, g].to(sub.device) > 0, True)
+                carried = torch.where(continuing, self._hold_left[sub].to(sub.device), 0)
+                chunk, left, pose = hold_grasp(
+                    actions[:, :n], prev, carried, self._hold_pose[sub], cfg.grasp_hold, g
+                )
+                actions = chunk
+                self._hold_left[sub] = left.to(self._hold_left)
+                self._hold_pose[sub] = pose.to(self._hold_pose)
             self._chunk[sub] = actions[:, :n].to(self._chunk)
             pushes[sampled] = (plan[:, n - 1] != plan[:, 0]).flatten(1).any(-1).to(idx.device)
         if stall:

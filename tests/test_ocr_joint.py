@@ -507,33 +507,3 @@ def test_grasp_hold_keeps_the_hand_still_while_the_gripper_closes(
     assert got[:4] == [[0.0, -1.0], [1.0, -1.0], [2.0, 1.0], [2.0, 1.0]]
     # chunk 2 starts with the 2 owed steps; its own close at step 2 follows a closed action: no new hold
     assert got[4:] == [[2.0, 1.0], [2.0, 1.0]]
-
-
-def test_regrasp_lift_opens_and_lifts_after_a_missed_grasp(diffusion_base, converted_dataset, monkeypatch):
-    """PROBE --policy.regrasp_lift: a row whose chunk ended closed while the end effector moved away from
-    the object gets an open-and-lift chunk instead of a sampled one; a row that held it is carried."""
-    horizon = TINY_OCR["horizon"]
-    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=2)
-    # Push-T's action (x, y) has no gripper or height entry: y reads as both, the gripper wins
-    joint.config.carry_tolerance, joint.config.gripper_action_index, joint.config.regrasp_lift = 1.0, -1, 5.0
-    calls = []
-
-    def sample(plan, state, frames, noise=None):
-        calls.append(len(plan))
-        return state[:, None].expand(-1, horizon, -1).clone()  # target: where the end effector is
-
-    monkeypatch.setattr(joint.inverse, "sample", sample)
-    joint.reset()
-    x, y, theta = OOD_POSE
-    for _ in range(2):  # both rows recover; their chunks end closed (y = 100)
-        joint.select_action(observation([OOD_POSE, OOD_POSE], [[300.0, 100.0], [300.0, 100.0]]))
-    # row 0's hand moved 10 px away from its object (a miss); row 1's object moved with its hand (held)
-    moved = [OOD_POSE, [x + 10, y, theta]]
-    action = joint.select_action(observation(moved, [[310.0, 100.0], [310.0, 100.0]]))
-    assert calls == [2] and joint.ocr_stats()["regrasp_lifts"] == 1
-    assert joint.ocr_stats()["carried_chunks"] == 1
-    assert action[0].tolist() == [310.0, -1.0]  # row 0: where the hand is, gripper open
-    joint.config.regrasp_lift = None  # off: the missed row samples again
-    for _ in range(2):
-        joint.select_action(observation(moved, [[320.0, 100.0], [320.0, 100.0]]))
-    assert joint.ocr_stats()["regrasp_lifts"] == 1

@@ -5,7 +5,6 @@ from lerobot_ocr.planner import (
     RecoveryPlanner,
     carry_along_plan,
     hold_grasp,
-    lift_open,
     plan_keypoint_trajectory,
     recovery_delay,
 )
@@ -141,14 +140,3 @@ def test_hold_grasp_repeats_the_close_action_and_carries_the_rest_over():
     # a hold longer than the chunk uses it all and owes the rest
     out, left, _ = hold_grasp(actions[3:], prev[3:], torch.tensor([6]), pose[3:], hold=2)
     assert out[0, :, 0].tolist() == [9.0] * 4 and left.tolist() == [2]
-
-
-def test_lift_open_opens_and_lifts_the_hand_where_it_is():
-    last = torch.tensor([[1.0, 2.0, 3.0, 0.5, -0.5, 1.0], [1.0, 2.0, 3.0, 0.5, -0.5, 1.0]])  # xyz, rot, grip
-    ee = torch.tensor([[4.0, 5.0, 0.5], [4.0, 5.0, 9.0]])
-    out = lift_open(last, ee, torch.tensor([2.0, 2.0]), 3)
-    assert out.shape == (2, 3, 6)
-    torch.testing.assert_close(out[0, :, :3], torch.tensor([4.0, 5.0, 2.0]).expand(3, 3))  # up to the top
-    torch.testing.assert_close(out[1, :, :3], torch.tensor([4.0, 5.0, 9.0]).expand(3, 3))  # never down
-    torch.testing.assert_close(out[..., 3:5], last[:, None, 3:5].expand(2, 3, 2))  # rotation kept
-    assert (out[..., -1] == -1.0).all()  # open

@@ -216,21 +216,3 @@ def hold_grasp(
             out[r, k + 1 : k + 1 + hold] = out[r, k]
             left[r] = max(0, k + 1 + hold - n)
     return out, left, pose
-
-
-def lift_open(
-    last_action: torch.Tensor, ee: torch.Tensor, top: torch.Tensor, n: int, gripper_index: int = -1
-):
-    """PROBE (regrasp_lift): a chunk that opens the gripper and lifts the hand after a missed grasp.
-
-    last_action (R, A) absolute world end-effector targets (position first, e.g. the `pose:*` frames);
-    ee (R, D) the end effector's position; top (R,) the height (world, last position axis) to lift to.
-    Returns (R, n, A): the hand's current horizontal position at height max(ee height, top), the last
-    action's rotation, the gripper open (-1), for n steps.
-    """
-    d = ee.shape[-1]
-    out = last_action.clone()
-    out[:, : d - 1] = ee[:, : d - 1].to(out)
-    out[:, d - 1] = torch.maximum(ee[:, d - 1].to(out), top.to(out))
-    out[:, gripper_index] = -1.0
-    return out[:, None].repeat(1, n, 1)

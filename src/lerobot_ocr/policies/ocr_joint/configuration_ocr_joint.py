@@ -98,12 +98,6 @@ class OcrJointConfig(PreTrainedConfig):
             10: Square joint OOD within the reference budget 0.63 -> 0.77 on 100 starts. `select_action`
             only. The reference's real-robot "waiting for grasp" rule (OCR_REFERENCE_CODE_FACTS.md §6;
             benchmarks/EXPERIMENTS.md, "Holding still while the fingers close").
-        regrasp_lift: PROBE. A recovering row whose last recovery chunk ended with the gripper closed
-            while the object stayed (moved less than carry_tolerance) and the end effector moved more
-            than 2 * carry_tolerance away from it (a missed grasp) gets a chunk that opens the gripper and
-            lifts the hand to regrasp_lift above the object's keypoint centre (world height, object
-            units), so its next grasp starts from above, as the demos' first grasp does. Needs
-            carry_tolerance. Default None (off).
         gripper_action_index: the action entry that commands the gripper, read as closed when > 0
             (robosuite's and the Franka robot's -1 open / +1 close). Default -1 (the last).
     Inverse policy: LeRobot's diffusion U-Net (`down_dims`, ...), DDIM with `num_inference_steps`
@@ -148,7 +142,6 @@ class OcrJointConfig(PreTrainedConfig):
     carry_tolerance: float | None = None
     gripper_action_index: int = -1
     grasp_hold: int = 0
-    regrasp_lift: float | None = None
 
     # Keypoint inverse policy (LeRobot's diffusion U-Net).
     down_dims: tuple[int, ...] = (256, 512, 1024)
@@ -231,11 +224,6 @@ class OcrJointConfig(PreTrainedConfig):
                 "--policy.carry_tolerance shifts absolute end-effector position actions, but "
                 "action_frame='none' says the actions are not positions; use it with action_frame "
                 "'point' or 'pose:<rotation>' only."
-            )
-        if self.regrasp_lift is not None and (self.carry_tolerance is None or not self.regrasp_lift > 0):
-            raise ValueError(
-                f"--policy.regrasp_lift must be > 0 (object units) and needs --policy.carry_tolerance, got "
-                f"{self.regrasp_lift}."
             )
         if self.grasp_hold < 0:
             raise ValueError(f"--policy.grasp_hold must be >= 0 steps, got {self.grasp_hold}.")

@@ -53,7 +53,7 @@ from lerobot_ocr.inverse_policy import KeypointInversePolicy
 from lerobot_ocr.joint_density import JointKeypointDensity
 from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
 from lerobot_ocr.manifold import KeypointManifold, RecoveryOutput
-from lerobot_ocr.planner import RecoveryPlanner, carry_along_plan, hold_grasp, lift_open
+from lerobot_ocr.planner import RecoveryPlanner, carry_along_plan, hold_grasp
 from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
 from lerobot_ocr.policies.ocr_joint.processor_ocr_joint import make_ocr_joint_pre_post_processors
 from lerobot_ocr.policies.ocr_joint.switch import SwitchState, advance, decide, needs_check
@@ -398,7 +398,6 @@ class OcrJointPolicy(PreTrainedPolicy):
             torch.Tensor
         ] = []  # per step, (B,) bool: the row got a new chunk (base or recovery)
         self._n_chunks = self._n_handbacks = self._n_shortened = self._n_carried = 0
-        self._n_lifted = 0  # PROBE regrasp_lift
 
     def _start_rows(self, b: int, device: torch.device) -> None:
         """A first step, or a batch of another size or device (a new rollout): all rows start on the base."""
@@ -500,7 +499,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         idx = rows.nonzero().squeeze(-1)
         recovery = obs.recovery.rows(idx)
         n = self._chunk.shape[1]
-        held, missed = self._held(obs, idx)
+        held = self._held(obs, idx)
         stall = cfg.stall_distance is not None
         if stall and self._chunk_keypoints is None:
             self._chunk_keypoints = obs.keypoints.clone()
@@ -516,17 +515,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             if self._hold_left is not None:
                 self._hold_left[rows_held] = 0
             pushes[held] = (plan[:, n - 1] != plan[:, 0]).flatten(1).any(-1).to(idx.device)
-        if bool(missed.any()):  # PROBE regrasp_lift
-            self._n_lifted += int(missed.sum())
-            rows_missed = idx[missed]
-            d = obs.keypoints.shape[-1]
-            ee = obs.state[rows_missed, cfg.ee_position_start : cfg.ee_position_start + d]
-            top = obs.keypoints[rows_missed].mean(1)[:, d - 1] + cfg.regrasp_lift
-            last = self._chunk[rows_missed, -1]
-            self._chunk[rows_missed] = lift_open(last, ee, top, n, cfg.gripper_action_index).to(self._chunk)
-            if self._hold_left is not None:
-                self._hold_left[rows_missed] = 0
-        sampled = ~held & ~missed
+        sampled = ~held
         if bool(sampled.any()):
             sub = idx[sampled]
             max_delay = None
@@ -544,7 +533,7 @@ class OcrJointPolicy(PreTrainedPolicy):
                 obs.frames[sub],
                 obs.keypoints[sub],
                 obs.state[sub],
-                recovery.rows(sampled) if not bool(sampled.all()) else recovery,
+                recovery.rows(sampled) if bool(held.any()) else recovery,
                 noise=None if noise is None else noise[sampled.to(noise.device)],
                 max_delay=max_delay,
             )
@@ -571,11 +560,8 @@ class OcrJointPolicy(PreTrainedPolicy):
             )
             self._chunk_centre[idx] = obs.keypoints[idx].mean(1).to(self._chunk_centre)
 
-    def _held(self, obs: Observed, idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(R,) bool for the rows `idx` about to get a recovery chunk: does the row hold the object? And
-        (R,) bool: did it miss a grasp (PROBE regrasp_lift: closed at the chunk's end while the object moved
-        less than carry_tolerance and the end effector more than 2 * carry_tolerance away from it; all
-        False when off)?
+    def _held(self, obs: Observed, idx: torch.Tensor) -> torch.Tensor:
+        """(R,) bool for the rows `idx` about to get a recovery chunk: does the row hold the object?
 
         Held (`carry_tolerance`): the row was recovering already, its last recovery chunk ended with the
         gripper closed (action[gripper_action_index] > 0), and over that chunk the keypoint centre moved
@@ -584,8 +570,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         """
         cfg = self.config
         if cfg.carry_tolerance is None:
-            none = torch.zeros(len(idx), dtype=torch.bool, device=idx.device)
-            return none, none
+            return torch.zeros(len(idx), dtype=torch.bool, device=idx.device)
         keypoints = obs.keypoints[idx]
         d = keypoints.shape[-1]
         if self._chunk_ee is None:
@@ -601,9 +586,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         continuing = self._switch.recovering[idx].to(keypoints.device)  # its last chunk was a recovery chunk
         tol = cfg.carry_tolerance
         held = continuing & closed & (torch.linalg.vector_norm(moved, dim=-1) > tol) & (apart < tol)
-        still = torch.linalg.vector_norm(moved, dim=-1) < tol  # the object stayed while the hand went
-        missed = continuing & closed & still & (apart > 2 * tol) & (cfg.regrasp_lift is not None)
-        return held.to(idx.device), missed.to(idx.device)
+        return held.to(idx.device)
 
     def _decide(self, obs: Observed | None, noise: torch.Tensor | None, device) -> torch.Tensor:
         """Switch the rows, plan the chunks they need, hand back; return the (B,) scores (NaN: unchecked)."""
@@ -728,7 +711,6 @@ class OcrJointPolicy(PreTrainedPolicy):
             "handbacks": self._n_handbacks,
             "shortened_plans": self._n_shortened,  # recovery plans capped at stall_delay after a stall
             "carried_chunks": self._n_carried,  # recovery chunks that carried a held object (carry_tolerance)
-            "regrasp_lifts": self._n_lifted,  # PROBE: open-and-lift chunks after a missed grasp
             "score": scores,
             "in_recovery": modes,
             "decisions": torch.stack(self._decisions).numpy() if self._decisions else None,

@@ -60,7 +60,7 @@ def solved_flags(run: Path) -> tuple[list[int] | None, dict[str, list[bool]]]:
     return (seeds if len(seeds) == len(steps) else None), flags
 
 
-def weights_digest(run: Path) -> str | None:
+def kept_weights_digest(run: Path) -> str | None:
     """The digest of the weights kept with a probe's outcomes (None for a run folder)."""
     return json.loads(run.read_text()).get("weights_sha256") if run.is_file() else None
 
@@ -72,7 +72,7 @@ def compare(a: Path, b: Path) -> dict[str, dict]:
         ValueError: the runs did not run the same episodes (seeds or count), or kept outcomes of two
             trainings.
     """
-    digests = {weights_digest(a), weights_digest(b)} - {None}
+    digests = {kept_weights_digest(a), kept_weights_digest(b)} - {None}
     if len(digests) > 1:
         raise ValueError(
             f"{a} and {b} ran other weights (their digests differ): pair runs of one training; a chain "

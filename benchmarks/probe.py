@@ -131,9 +131,9 @@ def cell_command(
 
 
 def weights_digest(checkpoint: Path) -> str:
-    """sha256 hex of a checkpoint's `*.safetensors` files (names and bytes; ocr_joint's `base/` included):
-    the trained networks, whatever the config says (an option given on the command line or written in
-    config.json is the probe's change, not another checkpoint).
+    """sha256 hex of a checkpoint's `*.safetensors` files (names and bytes; ocr_joint's `base/` and the
+    processors' normalizer stats included): the trained networks, whatever the config says (an option
+    given on the command line or written in config.json is the probe's change, not another checkpoint).
 
     Raises:
         ValueError: no weights under `checkpoint`.

@@ -502,8 +502,12 @@ def test_grasp_hold_keeps_the_hand_still_while_the_gripper_closes(
 
     monkeypatch.setattr(joint.inverse, "sample", sample)
     joint.reset()
-    got = [joint.select_action(observation([OOD_POSE], [[300.0, 100.0]]))[0].tolist() for _ in range(6)]
+    got = [joint.select_action(observation([OOD_POSE], [[300.0, 100.0]]))[0].tolist() for _ in range(8)]
     # chunk 1: 0, 1, then the close at x = 2 held (3 steps: 1 in this chunk, 2 in the next)
     assert got[:4] == [[0.0, -1.0], [1.0, -1.0], [2.0, 1.0], [2.0, 1.0]]
     # chunk 2 starts with the 2 owed steps; its own close at step 2 follows a closed action: no new hold
-    assert got[4:] == [[2.0, 1.0], [2.0, 1.0]]
+    assert got[4:] == [[2.0, 1.0], [2.0, 1.0], [2.0, 1.0], [3.0, 1.0]]
+    joint.config.grasp_hold = 0  # off: the chunk as sampled, the hand moving while it closes
+    joint.reset()
+    got = [joint.select_action(observation([OOD_POSE], [[300.0, 100.0]]))[0].tolist() for _ in range(4)]
+    assert got == ramp.tolist()

@@ -130,7 +130,8 @@ def test_hold_grasp_repeats_the_close_action_and_carries_the_rest_over():
     pose = torch.zeros(4, 2)
     pose[3] = torch.tensor([9.0, 1.0])
     out, left, held = hold_grasp(actions, prev, carried, pose, hold=2)
-    assert out[0, :, 0].tolist() == [0.0, 1.0, 1.0, 1.0] and out[0, 1:, 1].tolist() == [1.0, 1.0, 1.0]
+    assert out[0, :, 0].tolist() == [0.0, 1.0, 1.0, 1.0]
+    torch.testing.assert_close(held[0], torch.tensor([1.0, 1.0]))  # the close action is the held pose
     assert out[1, :, 0].tolist() == [0.0, 1.0, 2.0, 3.0] and left[1] == 2  # the hold runs into the next chunk
     torch.testing.assert_close(held[1], torch.tensor([3.0, 1.0]))
     torch.testing.assert_close(out[2], actions[2])  # closed before: nothing to hold
@@ -140,3 +141,23 @@ def test_hold_grasp_repeats_the_close_action_and_carries_the_rest_over():
     # a hold longer than the chunk uses it all and owes the rest
     out, left, _ = hold_grasp(actions[3:], prev[3:], torch.tensor([6]), pose[3:], hold=2)
     assert out[0, :, 0].tolist() == [9.0] * 4 and left.tolist() == [2]
+
+
+def test_hold_grasp_holds_a_close_at_the_first_step_and_one_after_a_carried_hold():
+    # (x, gripper): row 0 closes at step 0 after an open action; row 1 finishes a 1-step carried hold,
+    # opens, and closes again at step 3
+    g = torch.tensor([[1, 1, 1, 1, 1], [1, -1, -1, 1, 1]], dtype=torch.float32)
+    actions = torch.stack([torch.arange(5.0).expand(2, 5), g], -1)
+    pose = torch.tensor([[0.0, 0.0], [7.0, 1.0]])
+    out, left, held = hold_grasp(actions, torch.tensor([False, False]), torch.tensor([0, 1]), pose, hold=2)
+    assert out[0, :, 0].tolist() == [0.0, 0.0, 0.0, 3.0, 4.0] and left[0] == 0
+    assert out[1, :, 0].tolist() == [7.0, 1.0, 2.0, 3.0, 3.0] and left[1] == 1
+    torch.testing.assert_close(held, torch.tensor([[0.0, 1.0], [3.0, 1.0]]))
+
+
+def test_hold_grasp_refuses_mismatched_shapes():
+    actions = torch.zeros(2, 4, 3)
+    with pytest.raises(ValueError, match=r"Need actions \(R, n, A\)"):
+        hold_grasp(actions, torch.zeros(3, dtype=torch.bool), torch.zeros(2), torch.zeros(2, 3), hold=2)
+    with pytest.raises(ValueError, match=r"Need carried_pose \(R, A\)"):
+        hold_grasp(actions, torch.zeros(2, dtype=torch.bool), torch.zeros(2), torch.zeros(2, 2), hold=2)

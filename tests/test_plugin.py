@@ -99,6 +99,10 @@ def test_config_rejects_bad_recovery_settings():
         OcrJointConfig(device="cpu", carry_tolerance=0.005, ee_position_start=None)
     with pytest.raises(ValueError, match="action_frame='none'"):
         OcrJointConfig(device="cpu", carry_tolerance=0.005, action_frame="none")
+    with pytest.raises(ValueError, match="grasp_hold must be >= 0"):
+        OcrJointConfig(device="cpu", grasp_hold=-1)
+    with pytest.raises(ValueError, match="grasp_hold repeats an absolute"):
+        OcrJointConfig(device="cpu", grasp_hold=10, action_frame="none")
     # off, the cap is not checked: a short horizon stays valid with the default stall_delay
     assert (
         OcrJointConfig(device="cpu", horizon=4, down_dims=(32, 64), n_recovery_action_steps=4).stall_delay

@@ -187,14 +187,35 @@ def hold_grasp(
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Recovery actions that hold the hand still while the fingers close, as the demos do.
 
-    actions (R, n, A): one executed chunk per row (world frame); prev_closed (R,) bool: the row's
-    previous executed action closed the gripper; carried_hold (R,) steps of a hold left over from the
-    row's last chunk and carried_pose (R, A) its action. The first close command (action[gripper_index]
-    > 0) that follows an open one is repeated for the next `hold` steps. Returns the actions, the (R,)
-    steps of the hold that run past the chunk's end, and the (R, A) held actions. Used by `ocr_joint`'s
-    `grasp_hold`: the reference's real-robot "waiting for grasp" rule (OCR_REFERENCE_CODE_FACTS.md §6);
-    Square, benchmarks/EXPERIMENTS.md "Holding still while the fingers close".
+    actions (R, n, A): one executed chunk per row (absolute world-frame end-effector targets and a
+    gripper command); prev_closed (R,) bool: the row's previous executed action closed the gripper;
+    carried_hold (R,) int: steps of a hold left over from the row's last chunk, carried_pose (R, A) its
+    action; hold: steps to hold (>= 0). A row first runs its carried hold (the chunk's first
+    min(carried_hold, n) actions are replaced by carried_pose); then the first close command
+    (action[gripper_index] > 0) that follows an open one replaces the next `hold` actions (the plan's
+    motion over them is skipped, not delayed); later closes in the chunk are left as they are.
+    Returns the (R, n, A) actions, the (R,) steps of the hold that run past the chunk's end, and the
+    (R, A) held actions (carried_pose where no new hold started).
+
+    Raises:
+        ValueError: actions is not (R, n, A), or prev_closed, carried_hold, carried_pose do not have its
+            R rows (and A entries), or hold < 0.
+
+    Used by `ocr_joint`'s `grasp_hold`, after the reference's real-robot "waiting for grasp" rule
+    (OCR_REFERENCE_CODE_FACTS.md §6); Square: benchmarks/EXPERIMENTS.md "Holding still while the fingers
+    close".
     """
+    rows = actions.shape[:1]
+    if actions.dim() != 3 or prev_closed.shape != rows or carried_hold.shape != rows:
+        raise ValueError(
+            f"Need actions (R, n, A) and prev_closed, carried_hold (R,), got {tuple(actions.shape)}, "
+            f"{tuple(prev_closed.shape)}, {tuple(carried_hold.shape)}."
+        )
+    if carried_pose.shape != (actions.shape[0], actions.shape[2]) or hold < 0:
+        raise ValueError(
+            f"Need carried_pose (R, A) = {(actions.shape[0], actions.shape[2])} and hold >= 0, got "
+            f"{tuple(carried_pose.shape)} and {hold}."
+        )
     out = actions.clone()
     n = out.shape[1]
     left = torch.zeros(len(out), dtype=torch.long, device=out.device)

@@ -90,14 +90,20 @@ class OcrJointConfig(PreTrainedConfig):
             position actions (`action_frame` "pose:*" or "point"). Default None (off); the shipped
             Square config 0.005 (5 mm): Square joint OOD 0.49 -> 0.645 on 200 paired starts. `select_action`
             only. Beyond the paper (benchmarks/EXPERIMENTS.md, "Carrying a held nut, adopted").
-        grasp_hold: prehensile tasks (steps): after a sampled recovery action closes the gripper (open
-            before), that action is repeated for grasp_hold steps, on into the row's next chunk, so the
-            fingers close before the hand moves (near the object the plan moves at once, and the
-            inverse policy would move the hand while closing; the Square demos hold still 10 steps).
-            Needs a gripper entry (`gripper_action_index`). Default 0 (off); the shipped Square config
-            10: Square joint OOD within the reference budget 0.63 -> 0.77 on 100 starts. `select_action`
-            only. The reference's real-robot "waiting for grasp" rule (OCR_REFERENCE_CODE_FACTS.md §6;
-            benchmarks/EXPERIMENTS.md, "Holding still while the fingers close").
+        grasp_hold: prehensile tasks (steps): after a sampled recovery action closes the gripper (the
+            row's previous recovery action open), that action replaces the next grasp_hold actions, on
+            into the row's next chunk, so the fingers close before the hand moves (near the object the
+            plan moves at once, and the inverse policy would move the hand while closing; the Square
+            demos hold still 10 steps). The plan then goes on from where it would be (the held steps'
+            motion is skipped, not delayed). A hold still owed ends when the row hands back or its
+            next chunk carries the object (`carry_tolerance`: the grasp held); a close in the first
+            action of a row's first recovery chunk is not held (its previous action is the base's).
+            Needs a gripper entry (`gripper_action_index`) and absolute position actions (`action_frame`
+            not "none"). Default 0 (off); the shipped Square config 10: Square joint OOD within the
+            reference budget 0.63 -> 0.77 on 100 paired starts. `select_action` only. After the
+            reference's real-robot "waiting for grasp" rule, which repeats the previous action with the
+            gripper closed (OCR_REFERENCE_CODE_FACTS.md §6); here the close action's own pose is held
+            for a fixed time (benchmarks/EXPERIMENTS.md, "Holding still while the fingers close").
         gripper_action_index: the action entry that commands the gripper, read as closed when > 0
             (robosuite's and the Franka robot's -1 open / +1 close). Default -1 (the last).
     Inverse policy: LeRobot's diffusion U-Net (`down_dims`, ...), DDIM with `num_inference_steps`
@@ -227,6 +233,13 @@ class OcrJointConfig(PreTrainedConfig):
             )
         if self.grasp_hold < 0:
             raise ValueError(f"--policy.grasp_hold must be >= 0 steps, got {self.grasp_hold}.")
+        if self.grasp_hold and FrameSpec.parse(self.action_frame).kind == "none":
+            raise ValueError(
+                "--policy.grasp_hold repeats an absolute end-effector action to hold the hand still, but "
+                "action_frame='none' says the actions are not positions (repeating a relative action "
+                "keeps the hand moving); use it with action_frame 'point' or 'pose:<rotation>', or leave "
+                "grasp_hold 0."
+            )
         if self.fixed_delay is not None and not 0 <= self.fixed_delay < self.horizon:
             raise ValueError(
                 f"--policy.fixed_delay must be in [0, horizon={self.horizon}) or None, got "

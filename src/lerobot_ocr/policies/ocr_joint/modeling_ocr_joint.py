@@ -493,7 +493,10 @@ class OcrJointPolicy(PreTrainedPolicy):
         check, and `ocr_stats()["shortened_plans"]` counts the capped plans. With `carry_tolerance`, a
         row that holds the object (`_held`) gets its chunk from `carry_along_plan` instead of the
         inverse policy (its noise is unused); `ocr_stats()["carried_chunks"]` counts them. A carried
-        plan moves at once, so an object that then stays put (it slipped) counts as a stall.
+        plan moves at once, so an object that then stays put (it slipped) counts as a stall. With
+        `grasp_hold`, a sampled chunk's first close (after an open action) is held (`hold_grasp`), the
+        steps owed past the chunk's end in `_hold_left`/`_hold_pose`; a carried chunk, a hand-back or a
+        new episode drops them, and a row entering recovery counts as closed before (no hold at index 0).
         """
         cfg = self.config
         idx = rows.nonzero().squeeze(-1)
@@ -512,8 +515,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             plan = self.planner(obs.keypoints[rows_held], vector, None, delay=0)
             last = self._chunk[rows_held, -1].to(plan.dtype)
             self._chunk[rows_held] = carry_along_plan(plan, last)[:, :n].to(self._chunk)
-            if self._hold_left is not None:
-                self._hold_left[rows_held] = 0
+            self._hold_left[rows_held] = 0  # it holds the object: the grasp is done
             pushes[held] = (plan[:, n - 1] != plan[:, 0]).flatten(1).any(-1).to(idx.device)
         sampled = ~held
         if bool(sampled.any()):

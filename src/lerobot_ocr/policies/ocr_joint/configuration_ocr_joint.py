@@ -100,7 +100,7 @@ class OcrJointConfig(PreTrainedConfig):
             action of a row's first recovery chunk is not held (its previous action is the base's).
             Needs a gripper entry (`gripper_action_index`) and absolute position actions (`action_frame`
             not "none"). Default 0 (off); the shipped Square config 10: Square joint OOD within the
-            reference budget 0.63 -> 0.77 on 100 paired starts. `select_action` only. After the
+            reference budget 0.63 -> 0.72 on 200 paired starts. `select_action` only. After the
             reference's real-robot "waiting for grasp" rule, which repeats the previous action with the
             gripper closed (OCR_REFERENCE_CODE_FACTS.md §6); here the close action's own pose is held
             for a fixed time (benchmarks/EXPERIMENTS.md, "Holding still while the fingers close").

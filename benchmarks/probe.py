@@ -140,13 +140,12 @@ def weights_digest(checkpoint: Path) -> str:
     """
     import hashlib
 
-    files = sorted(checkpoint.rglob("*.safetensors"))
-    if not files:
+    from lerobot_ocr.eval_resume import hash_files
+
+    if not any(checkpoint.rglob("*.safetensors")):
         raise ValueError(f"{checkpoint} holds no *.safetensors weights: pass a pretrained_model folder.")
     digest = hashlib.sha256()
-    for f in files:
-        digest.update(str(f.relative_to(checkpoint)).encode())
-        digest.update(f.read_bytes())
+    hash_files(digest, checkpoint, "*.safetensors")
     return digest.hexdigest()
 
 

@@ -64,8 +64,10 @@ def joined_args(args: list[str]) -> list[str]:
     return out
 
 
-def _hash_files(digest, root: Path) -> None:
-    files = [root] if root.is_file() else sorted(p for p in root.rglob("*") if p.is_file())
+def hash_files(digest, root: Path, pattern: str = "*") -> None:
+    """Feed a file's, or a folder's files' (those matching `pattern`, recursively, sorted) names relative
+    to `root` and bytes into the hashlib object `digest`."""
+    files = [root] if root.is_file() else sorted(p for p in root.rglob(pattern) if p.is_file())
     for f in files:
         digest.update(str(f.relative_to(root) if f != root else f.name).encode())
         with open(f, "rb") as fh:
@@ -90,7 +92,7 @@ def run_key(args: list[str]) -> str:
     for flag in ("policy.path", "config_path"):
         values = [a.split("=", 1)[1] for a in args if a.startswith(f"--{flag}=")]
         if values and Path(values[-1]).exists():
-            _hash_files(digest, Path(values[-1]))
+            hash_files(digest, Path(values[-1]))
     return digest.hexdigest()
 
 

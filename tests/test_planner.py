@@ -161,21 +161,3 @@ def test_hold_grasp_refuses_mismatched_shapes():
         hold_grasp(actions, torch.zeros(3, dtype=torch.bool), torch.zeros(2), torch.zeros(2, 3), hold=2)
     with pytest.raises(ValueError, match=r"Need carried_pose \(R, A\)"):
         hold_grasp(actions, torch.zeros(2, dtype=torch.bool), torch.zeros(2), torch.zeros(2, 2), hold=2)
-
-
-def test_hold_grasp_settles_open_before_closing_across_the_chunk_end():
-    # one row, (x, gripper): the hand moves 0..5 and closes from step 5; settle 2 keeps the gripper
-    # open at the close's pose for 2 steps, then closes and holds 2 more (3 closed steps in all)
-    actions = torch.stack([torch.arange(6.0), torch.tensor([-1.0] * 5 + [1.0])], -1)[None]
-    out, left, pose = hold_grasp(
-        actions, torch.tensor([False]), torch.tensor([0]), torch.zeros(1, 2), hold=2,
-        settle=2, prev_gripper=torch.tensor([-1.0]),
-    )
-    assert out[0].tolist() == [[0, -1], [1, -1], [2, -1], [3, -1], [4, -1], [5, -1]] and left.tolist() == [4]
-    nxt = torch.stack([10 + torch.arange(6.0), torch.ones(6)], -1)[None]
-    out, left, _ = hold_grasp(
-        nxt, out[:, -1, 1] > 0, left, pose, hold=2, settle=2, prev_gripper=out[:, -1, 1]
-    )
-    assert out[0].tolist() == [[5, -1], [5, 1], [5, 1], [5, 1], [14, 1], [15, 1]] and left.tolist() == [0]
-    with pytest.raises(ValueError, match="settle > 0 needs prev_gripper"):
-        hold_grasp(actions, torch.tensor([False]), torch.tensor([0]), torch.zeros(1, 2), hold=2, settle=2)

@@ -184,8 +184,6 @@ def hold_grasp(
     carried_pose: torch.Tensor,
     hold: int,
     gripper_index: int = -1,
-    settle: int = 0,
-    prev_gripper: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Recovery actions that hold the hand still while the fingers close, as the demos do.
 
@@ -218,8 +216,6 @@ def hold_grasp(
             f"Need carried_pose (R, A) = {(actions.shape[0], actions.shape[2])} and hold >= 0, got "
             f"{tuple(carried_pose.shape)} and {hold}."
         )
-    if settle and prev_gripper is None:
-        raise ValueError("settle > 0 needs prev_gripper, the (R,) gripper command executed last.")
     out = actions.clone()
     n = out.shape[1]
     left = torch.zeros(len(out), dtype=torch.long, device=out.device)
@@ -228,9 +224,6 @@ def hold_grasp(
         start = min(int(carried_hold[r]), n)
         if start:
             out[r, :start] = pose[r]
-            n_open = min(max(0, int(carried_hold[r]) - hold - 1), start) if settle else 0  # settle owed
-            if n_open:
-                out[r, :n_open, gripper_index] = prev_gripper[r].to(out)
             left[r] = int(carried_hold[r]) - start
             if left[r]:
                 continue
@@ -241,9 +234,6 @@ def hold_grasp(
         if len(onsets):
             k = int(onsets[0])
             pose[r] = out[r, k]
-            opened = out[r, k - 1, gripper_index] if k else prev_gripper[r].to(out) if settle else None
-            out[r, k + 1 : k + 1 + settle + hold] = out[r, k]
-            if settle:
-                out[r, k : k + settle, gripper_index] = opened
-            left[r] = max(0, k + 1 + settle + hold - n)
+            out[r, k + 1 : k + 1 + hold] = out[r, k]
+            left[r] = max(0, k + 1 + hold - n)
     return out, left, pose

@@ -148,7 +148,6 @@ class OcrJointConfig(PreTrainedConfig):
     carry_tolerance: float | None = None
     gripper_action_index: int = -1
     grasp_hold: int = 0
-    grasp_settle: int = 0
 
     # Keypoint inverse policy (LeRobot's diffusion U-Net).
     down_dims: tuple[int, ...] = (256, 512, 1024)
@@ -231,11 +230,6 @@ class OcrJointConfig(PreTrainedConfig):
                 "--policy.carry_tolerance shifts absolute end-effector position actions, but "
                 "action_frame='none' says the actions are not positions; use it with action_frame "
                 "'point' or 'pose:<rotation>' only."
-            )
-        if self.grasp_settle < 0 or (self.grasp_settle and not self.grasp_hold):
-            raise ValueError(
-                f"--policy.grasp_settle must be >= 0 steps and needs grasp_hold > 0, got "
-                f"{self.grasp_settle} with grasp_hold {self.grasp_hold}."
             )
         if self.grasp_hold < 0:
             raise ValueError(f"--policy.grasp_hold must be >= 0 steps, got {self.grasp_hold}.")

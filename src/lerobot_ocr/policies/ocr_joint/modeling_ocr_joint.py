@@ -544,10 +544,8 @@ class OcrJointPolicy(PreTrainedPolicy):
                 continuing = self._switch.recovering[sub].to(sub.device)
                 prev = torch.where(continuing, self._chunk[sub, -1, g].to(sub.device) > 0, True)
                 carried = torch.where(continuing, self._hold_left[sub].to(sub.device), 0)
-                prev_g = torch.where(continuing, self._chunk[sub, -1, g].to(sub.device), 1.0)
                 chunk, left, pose = hold_grasp(
-                    actions[:, :n], prev, carried, self._hold_pose[sub], cfg.grasp_hold, g,
-                    settle=cfg.grasp_settle, prev_gripper=prev_g.to(actions),
+                    actions[:, :n], prev, carried, self._hold_pose[sub], cfg.grasp_hold, g
                 )
                 actions = chunk
                 self._hold_left[sub] = left.to(self._hold_left)

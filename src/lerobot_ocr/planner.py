@@ -184,6 +184,8 @@ def hold_grasp(
     carried_pose: torch.Tensor,
     hold: int,
     gripper_index: int = -1,
+    grasp_target: torch.Tensor | None = None,
+    snap_radius: float = 0.0,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Recovery actions that hold the hand still while the fingers close, as the demos do.
 
@@ -234,6 +236,10 @@ def hold_grasp(
         if len(onsets):
             k = int(onsets[0])
             pose[r] = out[r, k]
-            out[r, k + 1 : k + 1 + hold] = out[r, k]
+            if grasp_target is not None:  # PROBE grasp_snap: close at the demos' grasp point if near
+                d = grasp_target.shape[-1]
+                if float(torch.linalg.vector_norm(out[r, k, :d] - grasp_target[r].to(out))) < snap_radius:
+                    pose[r, :d] = grasp_target[r].to(out)
+            out[r, k : k + 1 + hold] = pose[r]
             left[r] = max(0, k + 1 + hold - n)
     return out, left, pose

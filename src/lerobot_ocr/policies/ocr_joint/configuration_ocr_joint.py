@@ -148,6 +148,8 @@ class OcrJointConfig(PreTrainedConfig):
     carry_tolerance: float | None = None
     gripper_action_index: int = -1
     grasp_hold: int = 0
+    grasp_point: list[float] | None = None  # PROBE grasp_snap
+    grasp_snap: float = 0.0  # PROBE
 
     # Keypoint inverse policy (LeRobot's diffusion U-Net).
     down_dims: tuple[int, ...] = (256, 512, 1024)

@@ -544,8 +544,15 @@ class OcrJointPolicy(PreTrainedPolicy):
                 continuing = self._switch.recovering[sub].to(sub.device)
                 prev = torch.where(continuing, self._chunk[sub, -1, g].to(sub.device) > 0, True)
                 carried = torch.where(continuing, self._hold_left[sub].to(sub.device), 0)
+                target = None
+                if cfg.grasp_snap > 0:
+                    frames = obs.frames[sub]
+                    d = frames.shape[-1] - 1
+                    point = torch.as_tensor(cfg.grasp_point, dtype=frames.dtype, device=frames.device)
+                    target = frames[:, :d, :d] @ point + frames[:, :d, d]
                 chunk, left, pose = hold_grasp(
-                    actions[:, :n], prev, carried, self._hold_pose[sub], cfg.grasp_hold, g
+                    actions[:, :n], prev, carried, self._hold_pose[sub], cfg.grasp_hold, g,
+                    grasp_target=target, snap_radius=cfg.grasp_snap,
                 )
                 actions = chunk
                 self._hold_left[sub] = left.to(self._hold_left)

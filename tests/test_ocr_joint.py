@@ -511,3 +511,60 @@ def test_grasp_hold_keeps_the_hand_still_while_the_gripper_closes(
     joint.reset()
     got = [joint.select_action(observation([OOD_POSE], [[300.0, 100.0]]))[0].tolist() for _ in range(4)]
     assert got == ramp.tolist()
+
+
+def test_grasp_snap_learns_the_demos_grasp_point_and_closes_there(
+    diffusion_base, converted_dataset, monkeypatch, tmp_path
+):
+    """--policy.grasp_snap: the demos' grasp point (object frame) is learned from the training table and
+    saved in config.json; a held close within grasp_snap of it (placed by the object's pose) is held at
+    the point, one farther is held where it closed; a checkpoint without the point is refused."""
+    from lerobot.policies.factory import get_policy_class
+
+    from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
+
+    horizon = TINY_OCR["horizon"]
+    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=4)
+    joint.save_pretrained(tmp_path / "plain")
+    cfg = joint.config
+    cfg.gripper_action_index, cfg.grasp_hold, cfg.grasp_snap = -1, 3, 1.0  # Push-T's y entry as the gripper
+    # a synthetic gripper command: every episode closes from its 5th frame on
+    last = joint._tbl_last
+    first = torch.cat([torch.zeros(1, dtype=torch.long), (last[1:] != last[:-1]).nonzero().flatten() + 1])
+    pos = torch.arange(len(last))
+    start_of = first[torch.searchsorted(first, pos, right=True) - 1]
+    joint._tbl_action[:, -1] = torch.where(pos - start_of >= 5, 1.0, -1.0)
+    at = first + 5
+    frames = joint._tbl_frames[at].double()
+    local = torch.linalg.solve(
+        frames, torch.cat([joint._tbl_state[at, :2].double(), torch.ones(len(at), 1)], 1)[..., None]
+    )
+    joint._fit_from_table()
+    assert cfg.grasp_point == pytest.approx(local[:, :2, 0].mean(0).tolist(), abs=1e-4)
+    joint.save_pretrained(tmp_path / "snap")
+    assert (tmp_path / "snap" / "config.json").read_text().count('"grasp_point"') == 1
+
+    ramp = torch.tensor([[0.0, -1.0], [1.0, -1.0], [2.0, 1.0], [3.0, 1.0]])  # closes at (2, 1)
+
+    def sample(plan, state, frames, noise=None):
+        out = torch.zeros(len(plan), horizon, 2)
+        out[:, :4] = ramp
+        out[:, 4:] = ramp[-1]
+        return out
+
+    monkeypatch.setattr(joint.inverse, "sample", sample)
+    x, y, theta = OOD_POSE  # the point placed at world (2.5, 1.5) by the OOD pose: 0.71 from the close
+    c, s = np.cos(theta), np.sin(theta)
+    cfg.grasp_point = [c * (2.5 - x) + s * (1.5 - y), -s * (2.5 - x) + c * (1.5 - y)]
+    for snap, held in ((1.0, [2.5, 1.5]), (0.5, [2.0, 1.0])):
+        cfg.grasp_snap = snap
+        joint.reset()
+        got = [joint.select_action(observation([OOD_POSE], [[300.0, 100.0]]))[0] for _ in range(6)]
+        torch.testing.assert_close(torch.stack(got[2:]), torch.tensor([held] * 4), atol=1e-3, rtol=0)
+        assert [a.tolist() for a in got[:2]] == ramp[:2].tolist()
+
+    monkeypatch.setattr(OcrJointConfig, "validate_features", lambda self: None)  # no gripper in Push-T
+    plain = get_policy_class("ocr_joint").from_pretrained(tmp_path / "plain").config
+    plain.grasp_hold, plain.grasp_snap = 3, 1.0
+    with pytest.raises(ValueError, match="needs the demos' grasp point, which this checkpoint does not hold"):
+        get_policy_class("ocr_joint").from_pretrained(tmp_path / "plain", config=plain)

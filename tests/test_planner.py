@@ -161,3 +161,33 @@ def test_hold_grasp_refuses_mismatched_shapes():
         hold_grasp(actions, torch.zeros(3, dtype=torch.bool), torch.zeros(2), torch.zeros(2, 3), hold=2)
     with pytest.raises(ValueError, match=r"Need carried_pose \(R, A\)"):
         hold_grasp(actions, torch.zeros(2, dtype=torch.bool), torch.zeros(2), torch.zeros(2, 2), hold=2)
+
+
+def test_hold_grasp_snaps_a_close_near_the_grasp_target_onto_it():
+    # (x, y, gripper): both rows close at step 1 at (1, 0); row 0's target lies 0.5 away, row 1's 2 away
+    actions = torch.tensor([[[0.0, 0.0, -1.0], [1.0, 0.0, 1.0], [2.0, 0.0, 1.0], [3.0, 0.0, 1.0]]]).repeat(
+        2, 1, 1
+    )
+    target = torch.tensor([[1.0, 0.5], [1.0, 2.0]])
+    out, left, pose = hold_grasp(
+        actions,
+        torch.tensor([False, False]),
+        torch.zeros(2, dtype=torch.long),
+        torch.zeros(2, 3),
+        hold=2,
+        grasp_target=target,
+        snap_radius=1.0,
+    )
+    assert out[0].tolist() == [[0.0, 0.0, -1.0]] + [[1.0, 0.5, 1.0]] * 3 and left[0] == 0
+    assert out[1].tolist() == [[0.0, 0.0, -1.0]] + [[1.0, 0.0, 1.0]] * 3
+    torch.testing.assert_close(pose, torch.tensor([[1.0, 0.5, 1.0], [1.0, 0.0, 1.0]]))
+    with pytest.raises(ValueError, match=r"Need grasp_target \(R, d\)"):
+        hold_grasp(
+            actions,
+            torch.tensor([False, False]),
+            torch.zeros(2, dtype=torch.long),
+            torch.zeros(2, 3),
+            hold=2,
+            grasp_target=torch.zeros(2, 4),
+            snap_radius=1.0,
+        )

@@ -196,16 +196,20 @@ def hold_grasp(
     min(carried_hold, n) actions are replaced by carried_pose); then the first close command
     (action[gripper_index] > 0) that follows an open one replaces the next `hold` actions (the plan's
     motion over them is skipped, not delayed); later closes in the chunk are left as they are.
+    grasp_target (R, d) world positions (None: off) and snap_radius (object units): a close whose first d
+    action entries lie within snap_radius of the row's target is held at the target instead (that close
+    action too; rotation and gripper entries as sampled): `ocr_joint`'s `grasp_snap`, the target being
+    the demos' grasp point (`grasp.demo_grasp_point`) placed by the object's current pose.
     Returns the (R, n, A) actions, the (R,) steps of the hold that run past the chunk's end, and the
     (R, A) held actions (carried_pose where no new hold started).
 
     Raises:
-        ValueError: actions is not (R, n, A), or prev_closed, carried_hold, carried_pose do not have its
-            R rows (and A entries), or hold < 0.
+        ValueError: actions is not (R, n, A), or prev_closed, carried_hold, carried_pose, grasp_target do
+            not have its R rows (and A or at most A entries), or hold < 0.
 
     Used by `ocr_joint`'s `grasp_hold`, after the reference's real-robot "waiting for grasp" rule
     (OCR_REFERENCE_CODE_FACTS.md §6); Square: benchmarks/EXPERIMENTS.md "Holding still while the fingers
-    close".
+    close" and "Closing at the demos' grasp point".
     """
     rows = actions.shape[:1]
     if actions.dim() != 3 or prev_closed.shape != rows or carried_hold.shape != rows:
@@ -217,6 +221,15 @@ def hold_grasp(
         raise ValueError(
             f"Need carried_pose (R, A) = {(actions.shape[0], actions.shape[2])} and hold >= 0, got "
             f"{tuple(carried_pose.shape)} and {hold}."
+        )
+    if grasp_target is not None and (
+        grasp_target.dim() != 2
+        or len(grasp_target) != len(actions)
+        or grasp_target.shape[1] > actions.shape[2]
+    ):
+        raise ValueError(
+            f"Need grasp_target (R, d) with R = {len(actions)} and d <= {actions.shape[2]}, got "
+            f"{tuple(grasp_target.shape)}."
         )
     out = actions.clone()
     n = out.shape[1]
@@ -236,10 +249,11 @@ def hold_grasp(
         if len(onsets):
             k = int(onsets[0])
             pose[r] = out[r, k]
-            if grasp_target is not None:  # PROBE grasp_snap: close at the demos' grasp point if near
-                d = grasp_target.shape[-1]
-                if float(torch.linalg.vector_norm(out[r, k, :d] - grasp_target[r].to(out))) < snap_radius:
-                    pose[r, :d] = grasp_target[r].to(out)
+            if grasp_target is not None:  # close at the demos' grasp point when near it
+                d = grasp_target.shape[1]
+                target = grasp_target[r].to(out)
+                if float(torch.linalg.vector_norm(out[r, k, :d] - target)) < snap_radius:
+                    pose[r, :d] = target
             out[r, k : k + 1 + hold] = pose[r]
             left[r] = max(0, k + 1 + hold - n)
     return out, left, pose

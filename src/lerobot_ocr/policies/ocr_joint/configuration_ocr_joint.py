@@ -104,6 +104,18 @@ class OcrJointConfig(PreTrainedConfig):
             reference's real-robot "waiting for grasp" rule, which repeats the previous action with the
             gripper closed (OCR_REFERENCE_CODE_FACTS.md §6); here the close action's own pose is held
             for a fixed time (benchmarks/EXPERIMENTS.md, "Holding still while the fingers close").
+        grasp_snap / grasp_point: prehensile tasks, with grasp_hold (object units): a held close whose
+            position lies within grasp_snap of the demos' grasp point (grasp_point, object frame, placed
+            by the object's current pose) is held at that point instead, so the fingers close where the
+            demos close them (the learned inverse policy closes a few centimetres off; a grasp off the
+            handle slips while carried). grasp_point None: learned at training from the dataset, the
+            mean end-effector position in the object frame at each demo's first close command
+            (`grasp.demo_grasp_point`, needs `ee_position_start`), and saved in config.json; set it by
+            hand for a checkpoint trained without it. Default None (off); the shipped Square config
+            0.03 (3 cm): Square joint OOD within the reference budget SNAP_NUMBERS.
+            `select_action` only. After the reference's real-robot rule that pulls each recovery action
+            toward the object (OCR_REFERENCE_CODE_FACTS.md §6), applied at the grasp only
+            (benchmarks/EXPERIMENTS.md, "Closing at the demos' grasp point").
         gripper_action_index: the action entry that commands the gripper, read as closed when > 0
             (robosuite's and the Franka robot's -1 open / +1 close). Default -1 (the last).
     Inverse policy: LeRobot's diffusion U-Net (`down_dims`, ...), DDIM with `num_inference_steps`
@@ -148,8 +160,8 @@ class OcrJointConfig(PreTrainedConfig):
     carry_tolerance: float | None = None
     gripper_action_index: int = -1
     grasp_hold: int = 0
-    grasp_point: list[float] | None = None  # PROBE grasp_snap
-    grasp_snap: float = 0.0  # PROBE
+    grasp_snap: float | None = None
+    grasp_point: list[float] | None = None
 
     # Keypoint inverse policy (LeRobot's diffusion U-Net).
     down_dims: tuple[int, ...] = (256, 512, 1024)
@@ -232,6 +244,21 @@ class OcrJointConfig(PreTrainedConfig):
                 "--policy.carry_tolerance shifts absolute end-effector position actions, but "
                 "action_frame='none' says the actions are not positions; use it with action_frame "
                 "'point' or 'pose:<rotation>' only."
+            )
+        if self.grasp_snap is not None and (self.grasp_snap <= 0 or not self.grasp_hold):
+            raise ValueError(
+                f"--policy.grasp_snap must be > 0 (object units) and needs grasp_hold > 0 (it moves the held "
+                f"close), got {self.grasp_snap} with grasp_hold {self.grasp_hold}; or leave it None."
+            )
+        if self.grasp_snap is not None and self.ee_position_start is None:
+            raise ValueError(
+                "--policy.grasp_snap learns the demos' grasp point from the end effector's position in the "
+                "state: set --policy.ee_position_start (or leave grasp_snap None)."
+            )
+        if self.grasp_point is not None and len(self.grasp_point) != self.object_dim:
+            raise ValueError(
+                f"--policy.grasp_point is a point in the object frame: {self.object_dim} numbers for "
+                f"pose_rotation={self.pose_rotation!r}, got {self.grasp_point}."
             )
         if self.grasp_hold < 0:
             raise ValueError(f"--policy.grasp_hold must be >= 0 steps, got {self.grasp_hold}.")

@@ -48,7 +48,8 @@ from lerobot_ocr.base_policy import (
     queued_actions,
 )
 from lerobot_ocr.dataset_columns import episode_last_positions, read_columns, window_positions
-from lerobot_ocr.geometry import pose_defects, pose_to_matrix
+from lerobot_ocr.geometry import pose_defects, pose_to_matrix, transform_points
+from lerobot_ocr.grasp import demo_grasp_point
 from lerobot_ocr.inverse_policy import KeypointInversePolicy
 from lerobot_ocr.joint_density import JointKeypointDensity
 from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
@@ -210,6 +211,12 @@ class OcrJointPolicy(PreTrainedPolicy):
             self._load_training_table(dataset_meta.root)
             if not config.pretrained_path:
                 self._fit_from_table()
+        if config.grasp_snap is not None and config.grasp_point is None:
+            raise ValueError(
+                "--policy.grasp_snap needs the demos' grasp point, which this checkpoint does not hold "
+                "(it was trained without grasp_snap): set --policy.grasp_point=[x,y,z] (object frame; "
+                "lerobot_ocr.grasp.demo_grasp_point computes it from the training dataset) or retrain."
+            )
         self.completed_stats: list[dict] = []
         self.reset()
 
@@ -315,6 +322,16 @@ class OcrJointPolicy(PreTrainedPolicy):
         self.calibrated_threshold_.fill_(float(self.manifold.threshold_))
         self.apply_threshold()
         self.fit_joint_density(self._tbl_keypoints)
+        if cfg.grasp_snap is not None and cfg.grasp_point is None:  # learned here, saved in config.json
+            start, d = cfg.ee_position_start, cfg.object_dim
+            point = demo_grasp_point(
+                self._tbl_state[:, start : start + d],
+                self._tbl_frames,
+                self._tbl_action[:, cfg.gripper_action_index],
+                self._tbl_last,  # one value per episode
+            )
+            cfg.grasp_point = [round(float(x), 6) for x in point]
+            logging.info("ocr_joint: the demos' grasp point (object frame) is %s", cfg.grasp_point)
         n = len(self._tbl_index)
         gen = torch.Generator().manual_seed(0)
         starts = torch.randperm(n, generator=gen)[: cfg.max_normalization_windows]
@@ -545,14 +562,18 @@ class OcrJointPolicy(PreTrainedPolicy):
                 prev = torch.where(continuing, self._chunk[sub, -1, g].to(sub.device) > 0, True)
                 carried = torch.where(continuing, self._hold_left[sub].to(sub.device), 0)
                 target = None
-                if cfg.grasp_snap > 0:
-                    frames = obs.frames[sub]
-                    d = frames.shape[-1] - 1
-                    point = torch.as_tensor(cfg.grasp_point, dtype=frames.dtype, device=frames.device)
-                    target = frames[:, :d, :d] @ point + frames[:, :d, d]
+                if cfg.grasp_snap is not None:  # the demos' grasp point where the object is now
+                    point = torch.as_tensor(cfg.grasp_point, dtype=obs.frames.dtype, device=obs.frames.device)
+                    target = transform_points(obs.frames[sub], point.expand(len(sub), 1, -1))[:, 0]
                 chunk, left, pose = hold_grasp(
-                    actions[:, :n], prev, carried, self._hold_pose[sub], cfg.grasp_hold, g,
-                    grasp_target=target, snap_radius=cfg.grasp_snap,
+                    actions[:, :n],
+                    prev,
+                    carried,
+                    self._hold_pose[sub],
+                    cfg.grasp_hold,
+                    g,
+                    grasp_target=target,
+                    snap_radius=cfg.grasp_snap or 0.0,
                 )
                 actions = chunk
                 self._hold_left[sub] = left.to(self._hold_left)

@@ -33,6 +33,12 @@ def test_demo_grasp_point_recovers_a_known_point_in_moving_object_frames():
     gripper = torch.tensor([-1.0, 1.0, 1.0, -1.0, 1.0, 1.0])
     episode = torch.tensor([0, 0, 0, 1, 1, 1])
     torch.testing.assert_close(demo_grasp_point(ee, frames, gripper, episode), p, atol=1e-5, rtol=0)
+    # two demos that grasp 2 cm apart along the object's x axis: the mean, not either one
+    shift = torch.tensor([0.02, 0.0, 0.0])
+    ee[4] = (frames[4, :3, :3] @ (p + shift) + frames[4, :3, 3]).float()
+    torch.testing.assert_close(
+        demo_grasp_point(ee, frames, gripper, episode), p + shift / 2, atol=1e-5, rtol=0
+    )
     # an SE(2) object: the point in its plane frame
     frames2 = pose_to_matrix(torch.tensor([[1.0, 2.0, 0.0], [0.0, 0.0, math.pi / 2]]), "angle")
     ee2 = torch.tensor([[1.0, 2.0], [0.0, 1.0]])  # the frame's origin, then 1 along its rotated x axis
@@ -44,6 +50,8 @@ def test_demo_grasp_point_refuses_demos_without_a_grasp_and_mismatched_frames():
     frames = torch.eye(4).repeat(3, 1, 1)
     with pytest.raises(ValueError, match="No demo closes the gripper after an open frame"):
         demo_grasp_point(torch.zeros(3, 3), frames, torch.ones(3), torch.zeros(3, dtype=torch.long))
+    with pytest.raises(ValueError, match=r"Need gripper and episode of shape \(3,\)"):
+        demo_grasp_point(torch.zeros(3, 3), frames, torch.ones(5), torch.zeros(3, dtype=torch.long))
     with pytest.raises(ValueError, match=r"Need frames \(3, 4, 4\)"):
         demo_grasp_point(
             torch.zeros(3, 3), frames[:, :3, :3], torch.ones(3), torch.zeros(3, dtype=torch.long)

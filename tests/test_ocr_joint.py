@@ -516,33 +516,51 @@ def test_grasp_hold_keeps_the_hand_still_while_the_gripper_closes(
 def test_grasp_snap_learns_the_demos_grasp_point_and_closes_there(
     diffusion_base, converted_dataset, monkeypatch, tmp_path
 ):
-    """--policy.grasp_snap: the demos' grasp point (object frame) is learned from the training table and
-    saved in config.json; a held close within grasp_snap of it (placed by the object's pose) is held at
-    the point, one farther is held where it closed; a checkpoint without the point is refused."""
+    """--policy.grasp_snap: training learns the demos' grasp point (object frame) from the dataset into
+    the config it was given (saved in config.json; the checkpoint loads with it); a held close within
+    grasp_snap of it (placed by the object's pose) is held at the point, one farther is held where it
+    closed; a checkpoint without the point is refused."""
+    import json
+
     from lerobot.policies.factory import get_policy_class
 
     from lerobot_ocr.policies.ocr_joint.configuration_ocr_joint import OcrJointConfig
+    from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
 
     horizon = TINY_OCR["horizon"]
-    joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=4)
-    joint.save_pretrained(tmp_path / "plain")
-    cfg = joint.config
-    cfg.gripper_action_index, cfg.grasp_hold, cfg.grasp_snap = -1, 3, 1.0  # Push-T's y entry as the gripper
-    # a synthetic gripper command: every episode closes from its 5th frame on
-    last = joint._tbl_last
-    first = torch.cat([torch.zeros(1, dtype=torch.long), (last[1:] != last[:-1]).nonzero().flatten() + 1])
-    pos = torch.arange(len(last))
-    start_of = first[torch.searchsorted(first, pos, right=True) - 1]
-    joint._tbl_action[:, -1] = torch.where(pos - start_of >= 5, 1.0, -1.0)
-    at = first + 5
-    frames = joint._tbl_frames[at].double()
-    local = torch.linalg.solve(
-        frames, torch.cat([joint._tbl_state[at, :2].double(), torch.ones(len(at), 1)], 1)[..., None]
+    make_joint(diffusion_base, converted_dataset).save_pretrained(tmp_path / "plain")
+    monkeypatch.setattr(OcrJointConfig, "validate_features", lambda self: None)  # Push-T's y as the gripper
+    load_table = OcrJointPolicy._load_training_table
+    expected = {}
+
+    def with_gripper(self, root):  # a synthetic gripper command: every episode closes from its 5th frame
+        load_table(self, root)
+        last = self._tbl_last
+        first = torch.cat([torch.zeros(1, dtype=torch.long), (last[1:] != last[:-1]).nonzero().flatten() + 1])
+        pos = torch.arange(len(last))
+        self._tbl_action[:, -1] = torch.where(
+            pos - first[torch.searchsorted(first, pos, right=True) - 1] >= 5, 1.0, -1.0
+        )
+        at = first + 5
+        ee = torch.cat([self._tbl_state[at, :2].double(), torch.ones(len(at), 1, dtype=torch.float64)], 1)
+        expected["point"] = torch.linalg.solve(self._tbl_frames[at].double(), ee[..., None])[:, :2, 0].mean(0)
+
+    monkeypatch.setattr(OcrJointPolicy, "_load_training_table", with_gripper)
+    cfg = OcrJointConfig(
+        base_path=str(diffusion_base),
+        **{**TINY_OCR, "n_recovery_action_steps": 4, "grasp_hold": 3, "grasp_snap": 1.0},
     )
-    joint._fit_from_table()
-    assert cfg.grasp_point == pytest.approx(local[:, :2, 0].mean(0).tolist(), abs=1e-4)
+    from lerobot.datasets import LeRobotDatasetMetadata
+    from lerobot.policies.factory import make_policy
+
+    joint = make_policy(cfg, ds_meta=LeRobotDatasetMetadata("local/pusht_ocr_ocr", root=converted_dataset))
+    assert joint.config is cfg  # lerobot-train saves this object as train_config.json's policy
+    assert cfg.grasp_point == pytest.approx(expected["point"].tolist(), abs=1e-4)
     joint.save_pretrained(tmp_path / "snap")
-    assert (tmp_path / "snap" / "config.json").read_text().count('"grasp_point"') == 1
+    assert json.loads((tmp_path / "snap" / "config.json").read_text())["grasp_point"] == cfg.grasp_point
+    assert (
+        get_policy_class("ocr_joint").from_pretrained(tmp_path / "snap").config.grasp_point == cfg.grasp_point
+    )
 
     ramp = torch.tensor([[0.0, -1.0], [1.0, -1.0], [2.0, 1.0], [3.0, 1.0]])  # closes at (2, 1)
 
@@ -563,7 +581,6 @@ def test_grasp_snap_learns_the_demos_grasp_point_and_closes_there(
         torch.testing.assert_close(torch.stack(got[2:]), torch.tensor([held] * 4), atol=1e-3, rtol=0)
         assert [a.tolist() for a in got[:2]] == ramp[:2].tolist()
 
-    monkeypatch.setattr(OcrJointConfig, "validate_features", lambda self: None)  # no gripper in Push-T
     plain = get_policy_class("ocr_joint").from_pretrained(tmp_path / "plain").config
     plain.grasp_hold, plain.grasp_snap = 3, 1.0
     with pytest.raises(ValueError, match="needs the demos' grasp point, which this checkpoint does not hold"):

@@ -103,14 +103,20 @@ def test_config_rejects_bad_recovery_settings():
         OcrJointConfig(device="cpu", grasp_hold=-1)
     with pytest.raises(ValueError, match="grasp_hold repeats an absolute"):
         OcrJointConfig(device="cpu", grasp_hold=10, action_frame="none")
-    with pytest.raises(ValueError, match="grasp_snap must be > 0 .* needs grasp_hold > 0"):
+    with pytest.raises(ValueError, match="grasp_snap moves the held close, so it needs --policy.grasp_hold"):
         OcrJointConfig(device="cpu", grasp_snap=0.03)
-    with pytest.raises(ValueError, match="grasp_snap must be > 0"):
-        OcrJointConfig(device="cpu", grasp_hold=10, grasp_snap=0.0)
+    for radius in (0.0, float("nan")):
+        with pytest.raises(ValueError, match="grasp_snap must be a finite radius > 0"):
+            OcrJointConfig(device="cpu", grasp_hold=10, grasp_snap=radius)
     with pytest.raises(ValueError, match="grasp_snap learns the demos' grasp point"):
         OcrJointConfig(device="cpu", grasp_hold=10, grasp_snap=0.03, ee_position_start=None)
-    with pytest.raises(ValueError, match="grasp_point is a point in the object frame: 2 numbers"):
-        OcrJointConfig(device="cpu", grasp_hold=10, grasp_snap=0.03, grasp_point=[0.05, 0.0, 0.0])
+    given = OcrJointConfig(
+        device="cpu", grasp_hold=10, grasp_snap=3.0, grasp_point=[1.0, 2.0], ee_position_start=None
+    )
+    assert given.grasp_point == [1.0, 2.0]  # a given point needs no end-effector state
+    for point in ([0.05, 0.0, 0.0], [0.05, float("nan")]):
+        with pytest.raises(ValueError, match="grasp_point is a point in the object frame: 2 finite numbers"):
+            OcrJointConfig(device="cpu", grasp_hold=10, grasp_snap=0.03, grasp_point=point)
     # off, the cap is not checked: a short horizon stays valid with the default stall_delay
     assert (
         OcrJointConfig(device="cpu", horizon=4, down_dims=(32, 64), n_recovery_action_steps=4).stall_delay

@@ -46,13 +46,20 @@ def demo_grasp_point(
 
     ee (N, d) world end-effector positions; frames (N, d+1, d+1) world-from-object poses; gripper (N,)
     gripper commands (closed when > 0); episode (N,) episode index, each episode's frames contiguous and
-    in time order. Units: the poses' (metres in robosuite). Returns (d,) in the object frame.
+    in time order. Units: the poses' (metres in robosuite). Returns (d,) in the object frame. The point
+    is where the hand measurably was when the close was commanded (not the commanded target), the mean
+    over episodes as measured on Square; one demo that first closes far off moves it by 1/E of its offset.
 
     Raises:
         ValueError: the shapes disagree, or no episode closes the gripper after an open frame (the
             demos hold no grasp to learn; turn `grasp_snap` off or set `grasp_point` by hand).
     """
     n, d = ee.shape
+    if gripper.shape != (n,) or episode.shape != (n,):
+        raise ValueError(
+            f"Need gripper and episode of shape ({n},) for ee {tuple(ee.shape)}, got {tuple(gripper.shape)}, "
+            f"{tuple(episode.shape)}."
+        )
     if frames.shape != (n, d + 1, d + 1):
         raise ValueError(
             f"Need frames ({n}, {d + 1}, {d + 1}) for ee {tuple(ee.shape)}, got {tuple(frames.shape)}."

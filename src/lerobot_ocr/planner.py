@@ -9,6 +9,7 @@ keypoints (the same convention as the inverse policy's training windows).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import torch
@@ -222,6 +223,8 @@ def hold_grasp(
             f"Need carried_pose (R, A) = {(actions.shape[0], actions.shape[2])} and hold >= 0, got "
             f"{tuple(carried_pose.shape)} and {hold}."
         )
+    if not (math.isfinite(snap_radius) and snap_radius >= 0):
+        raise ValueError(f"Need a finite snap_radius >= 0, got {snap_radius}.")
     if grasp_target is not None and (
         grasp_target.dim() != 2
         or len(grasp_target) != len(actions)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from lerobot.configs import NormalizationMode, PreTrainedConfig
@@ -112,7 +113,8 @@ class OcrJointConfig(PreTrainedConfig):
             mean end-effector position in the object frame at each demo's first close command
             (`grasp.demo_grasp_point`, needs `ee_position_start`), and saved in config.json; set it by
             hand for a checkpoint trained without it. Default None (off); the shipped Square config
-            0.03 (3 cm): Square joint OOD within the reference budget SNAP_NUMBERS.
+            0.03 (3 cm): Square joint OOD within the reference budget 0.72 -> 0.83 on 200
+            paired starts (0.67 -> 0.78 within 400 steps).
             `select_action` only. After the reference's real-robot rule that pulls each recovery action
             toward the object (OCR_REFERENCE_CODE_FACTS.md §6), applied at the grasp only
             (benchmarks/EXPERIMENTS.md, "Closing at the demos' grasp point").
@@ -245,19 +247,26 @@ class OcrJointConfig(PreTrainedConfig):
                 "action_frame='none' says the actions are not positions; use it with action_frame "
                 "'point' or 'pose:<rotation>' only."
             )
-        if self.grasp_snap is not None and (self.grasp_snap <= 0 or not self.grasp_hold):
+        if self.grasp_snap is not None and (not math.isfinite(self.grasp_snap) or self.grasp_snap <= 0):
             raise ValueError(
-                f"--policy.grasp_snap must be > 0 (object units) and needs grasp_hold > 0 (it moves the held "
-                f"close), got {self.grasp_snap} with grasp_hold {self.grasp_hold}; or leave it None."
+                f"--policy.grasp_snap must be a finite radius > 0 (object units), got {self.grasp_snap}."
             )
-        if self.grasp_snap is not None and self.ee_position_start is None:
+        if self.grasp_snap is not None and not self.grasp_hold:
+            raise ValueError(
+                "--policy.grasp_snap moves the held close, so it needs --policy.grasp_hold > 0 (or leave "
+                "grasp_snap None)."
+            )
+        if self.grasp_snap is not None and self.grasp_point is None and self.ee_position_start is None:
             raise ValueError(
                 "--policy.grasp_snap learns the demos' grasp point from the end effector's position in the "
-                "state: set --policy.ee_position_start (or leave grasp_snap None)."
+                "state: set --policy.ee_position_start, or give --policy.grasp_point (or leave grasp_snap "
+                "None)."
             )
-        if self.grasp_point is not None and len(self.grasp_point) != self.object_dim:
+        if self.grasp_point is not None and (
+            len(self.grasp_point) != self.object_dim or not all(math.isfinite(x) for x in self.grasp_point)
+        ):
             raise ValueError(
-                f"--policy.grasp_point is a point in the object frame: {self.object_dim} numbers for "
+                f"--policy.grasp_point is a point in the object frame: {self.object_dim} finite numbers for "
                 f"pose_rotation={self.pose_rotation!r}, got {self.grasp_point}."
             )
         if self.grasp_hold < 0:

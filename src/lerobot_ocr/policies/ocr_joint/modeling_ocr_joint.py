@@ -48,8 +48,8 @@ from lerobot_ocr.base_policy import (
     queued_actions,
 )
 from lerobot_ocr.dataset_columns import episode_last_positions, read_columns, window_positions
-from lerobot_ocr.geometry import pose_defects, pose_to_matrix, transform_points
-from lerobot_ocr.grasp import demo_grasp_point
+from lerobot_ocr.geometry import invert, pose_defects, pose_to_matrix, transform_points
+from lerobot_ocr.grasp import demo_grasp_point, first_close_positions
 from lerobot_ocr.inverse_policy import KeypointInversePolicy
 from lerobot_ocr.joint_density import JointKeypointDensity
 from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
@@ -211,11 +211,14 @@ class OcrJointPolicy(PreTrainedPolicy):
             self._load_training_table(dataset_meta.root)
             if not config.pretrained_path:
                 self._fit_from_table()
+            elif config.grasp_snap is not None and config.grasp_point is None:  # fine-tuning: learn it now
+                self._learn_grasp_point()
         if config.grasp_snap is not None and config.grasp_point is None:
             raise ValueError(
                 "--policy.grasp_snap needs the demos' grasp point, which this checkpoint does not hold "
-                "(it was trained without grasp_snap): set --policy.grasp_point=[x,y,z] (object frame; "
-                "lerobot_ocr.grasp.demo_grasp_point computes it from the training dataset) or retrain."
+                f"(it was trained without grasp_snap): set --policy.grasp_point (a list of "
+                f"{config.object_dim} numbers, object frame; lerobot_ocr.grasp.demo_grasp_point computes it "
+                "from the training dataset) or train with grasp_snap."
             )
         self.completed_stats: list[dict] = []
         self.reset()
@@ -322,16 +325,8 @@ class OcrJointPolicy(PreTrainedPolicy):
         self.calibrated_threshold_.fill_(float(self.manifold.threshold_))
         self.apply_threshold()
         self.fit_joint_density(self._tbl_keypoints)
-        if cfg.grasp_snap is not None and cfg.grasp_point is None:  # learned here, saved in config.json
-            start, d = cfg.ee_position_start, cfg.object_dim
-            point = demo_grasp_point(
-                self._tbl_state[:, start : start + d],
-                self._tbl_frames,
-                self._tbl_action[:, cfg.gripper_action_index],
-                self._tbl_last,  # one value per episode
-            )
-            cfg.grasp_point = [round(float(x), 6) for x in point]
-            logging.info("ocr_joint: the demos' grasp point (object frame) is %s", cfg.grasp_point)
+        if cfg.grasp_snap is not None and cfg.grasp_point is None:
+            self._learn_grasp_point()
         n = len(self._tbl_index)
         gen = torch.Generator().manual_seed(0)
         starts = torch.randperm(n, generator=gen)[: cfg.max_normalization_windows]
@@ -343,6 +338,28 @@ class OcrJointPolicy(PreTrainedPolicy):
             n,
             float(self.manifold.threshold_),
             cfg.score_type,
+        )
+
+    def _learn_grasp_point(self) -> None:
+        """`grasp_snap`: the demos' grasp point from the training table (`grasp.demo_grasp_point`) into the
+        config, which lerobot-train saves in config.json and train_config.json."""
+        cfg = self.config
+        start, d = cfg.ee_position_start, cfg.object_dim
+        gripper = self._tbl_action[:, cfg.gripper_action_index]
+        point = demo_grasp_point(
+            self._tbl_state[:, start : start + d], self._tbl_frames, gripper, self._tbl_last
+        )
+        cfg.grasp_point = [round(float(x), 6) for x in point]
+        at = first_close_positions(gripper, self._tbl_last)
+        local = transform_points(invert(self._tbl_frames[at]), self._tbl_state[at, None, start : start + d])[
+            :, 0
+        ]
+        logging.info(
+            "ocr_joint: the demos' grasp point (object frame) is %s, from %d of %d episodes (sd %s)",
+            cfg.grasp_point,
+            len(at),
+            len(self._tbl_last.unique()),
+            [round(float(x), 6) for x in local.std(0)] if len(at) > 1 else "-",
         )
 
     @torch.no_grad()
@@ -514,6 +531,8 @@ class OcrJointPolicy(PreTrainedPolicy):
         `grasp_hold`, a sampled chunk's first close (after an open action) is held (`hold_grasp`), the
         steps owed past the chunk's end in `_hold_left`/`_hold_pose`; a carried chunk, a hand-back or a
         new episode drops them, and a row entering recovery counts as closed before (no hold at index 0).
+        With `grasp_snap`, a sampled chunk's held close within grasp_snap of the demos' grasp point (placed
+        by the object's pose at this chunk's start) is held at that point; carried chunks are left alone.
         """
         cfg = self.config
         idx = rows.nonzero().squeeze(-1)

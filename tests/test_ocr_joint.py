@@ -477,6 +477,23 @@ def test_a_held_object_is_carried_along_the_plan(diffusion_base, converted_datas
     assert joint.ocr_stats()["shortened_plans"] == 1
 
 
+RAMP = torch.tensor(
+    [[0.0, -1.0], [1.0, -1.0], [2.0, 1.0], [3.0, 1.0]]
+)  # (x, y as the gripper): closes at step 2
+
+
+def closing_ramp(horizon: int):
+    """A stand-in for the inverse policy's `sample`: every row's chunk is RAMP, then its last action."""
+
+    def sample(plan, state, frames, noise=None):
+        out = torch.zeros(len(plan), horizon, 2)
+        out[:, :4] = RAMP
+        out[:, 4:] = RAMP[-1]
+        return out
+
+    return sample
+
+
 def test_carry_and_grasp_hold_need_a_gripper_entry_in_the_action(diffusion_base, converted_dataset):
     with pytest.raises(ValueError, match="is not a gripper entry of the 2-dim action"):
         make_joint(diffusion_base, converted_dataset, carry_tolerance=0.005)
@@ -492,15 +509,7 @@ def test_grasp_hold_keeps_the_hand_still_while_the_gripper_closes(
     horizon = TINY_OCR["horizon"]
     joint = make_joint(diffusion_base, converted_dataset, n_recovery_action_steps=4)
     joint.config.gripper_action_index, joint.config.grasp_hold = -1, 3  # Push-T's y entry as the gripper
-    ramp = torch.tensor([[0.0, -1.0], [1.0, -1.0], [2.0, 1.0], [3.0, 1.0]])  # closes at step 2 while moving
-
-    def sample(plan, state, frames, noise=None):
-        out = torch.zeros(len(plan), horizon, 2)
-        out[:, :4] = ramp
-        out[:, 4:] = ramp[-1]
-        return out
-
-    monkeypatch.setattr(joint.inverse, "sample", sample)
+    monkeypatch.setattr(joint.inverse, "sample", closing_ramp(horizon))  # closes at step 2 while moving
     joint.reset()
     got = [joint.select_action(observation([OOD_POSE], [[300.0, 100.0]]))[0].tolist() for _ in range(8)]
     # chunk 1: 0, 1, then the close at x = 2 held (3 steps: 1 in this chunk, 2 in the next)
@@ -510,7 +519,7 @@ def test_grasp_hold_keeps_the_hand_still_while_the_gripper_closes(
     joint.config.grasp_hold = 0  # off: the chunk as sampled, the hand moving while it closes
     joint.reset()
     got = [joint.select_action(observation([OOD_POSE], [[300.0, 100.0]]))[0].tolist() for _ in range(4)]
-    assert got == ramp.tolist()
+    assert got == RAMP.tolist()
 
 
 def test_grasp_snap_learns_the_demos_grasp_point_and_closes_there(
@@ -562,15 +571,7 @@ def test_grasp_snap_learns_the_demos_grasp_point_and_closes_there(
         get_policy_class("ocr_joint").from_pretrained(tmp_path / "snap").config.grasp_point == cfg.grasp_point
     )
 
-    ramp = torch.tensor([[0.0, -1.0], [1.0, -1.0], [2.0, 1.0], [3.0, 1.0]])  # closes at (2, 1)
-
-    def sample(plan, state, frames, noise=None):
-        out = torch.zeros(len(plan), horizon, 2)
-        out[:, :4] = ramp
-        out[:, 4:] = ramp[-1]
-        return out
-
-    monkeypatch.setattr(joint.inverse, "sample", sample)
+    monkeypatch.setattr(joint.inverse, "sample", closing_ramp(horizon))  # closes at (2, 1)
     x, y, theta = OOD_POSE  # the point placed at world (2.5, 1.5) by the OOD pose: 0.71 from the close
     c, s = np.cos(theta), np.sin(theta)
     cfg.grasp_point = [c * (2.5 - x) + s * (1.5 - y), -s * (2.5 - x) + c * (1.5 - y)]
@@ -579,7 +580,7 @@ def test_grasp_snap_learns_the_demos_grasp_point_and_closes_there(
         joint.reset()
         got = [joint.select_action(observation([OOD_POSE], [[300.0, 100.0]]))[0] for _ in range(6)]
         torch.testing.assert_close(torch.stack(got[2:]), torch.tensor([held] * 4), atol=1e-3, rtol=0)
-        assert [a.tolist() for a in got[:2]] == ramp[:2].tolist()
+        assert [a.tolist() for a in got[:2]] == RAMP[:2].tolist()
 
     plain = get_policy_class("ocr_joint").from_pretrained(tmp_path / "plain").config
     plain.grasp_hold, plain.grasp_snap = 3, 1.0

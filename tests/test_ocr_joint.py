@@ -575,11 +575,12 @@ def test_grasp_snap_learns_the_demos_grasp_point_and_closes_there(
     x, y, theta = OOD_POSE  # the point placed at world (2.5, 1.5) by the OOD pose: 0.71 from the close
     c, s = np.cos(theta), np.sin(theta)
     cfg.grasp_point = [c * (2.5 - x) + s * (1.5 - y), -s * (2.5 - x) + c * (1.5 - y)]
-    for snap, held in ((1.0, [2.5, 1.5]), (0.5, [2.0, 1.0])):
+    for snap, held, snapped in ((1.0, [2.5, 1.5], 1), (0.5, [2.0, 1.0], 0)):
         cfg.grasp_snap = snap
         joint.reset()
         got = [joint.select_action(observation([OOD_POSE], [[300.0, 100.0]]))[0] for _ in range(6)]
         torch.testing.assert_close(torch.stack(got[2:]), torch.tensor([held] * 4), atol=1e-3, rtol=0)
+        assert joint.ocr_stats()["snapped_grasps"] == snapped
         assert [a.tolist() for a in got[:2]] == RAMP[:2].tolist()
 
     plain = get_policy_class("ocr_joint").from_pretrained(tmp_path / "plain").config

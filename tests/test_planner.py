@@ -129,7 +129,7 @@ def test_hold_grasp_repeats_the_close_action_and_carries_the_rest_over():
     carried = torch.tensor([0, 0, 0, 2])
     pose = torch.zeros(4, 2)
     pose[3] = torch.tensor([9.0, 1.0])
-    out, left, held = hold_grasp(actions, prev, carried, pose, hold=2)
+    out, left, held, snapped = hold_grasp(actions, prev, carried, pose, hold=2)
     assert out[0, :, 0].tolist() == [0.0, 1.0, 1.0, 1.0]
     torch.testing.assert_close(held[0], torch.tensor([1.0, 1.0]))  # the close action is the held pose
     assert out[1, :, 0].tolist() == [0.0, 1.0, 2.0, 3.0] and left[1] == 2  # the hold runs into the next chunk
@@ -138,8 +138,9 @@ def test_hold_grasp_repeats_the_close_action_and_carries_the_rest_over():
     # row 3: the carried (closed) hold first; its own close at step 2 then follows a closed action: no hold
     assert out[3, :, 0].tolist() == [9.0, 9.0, 2.0, 3.0]
     assert left[0] == 0 and left[2] == 0 and left[3] == 0
+    assert not snapped.any()  # no grasp target: nothing snapped
     # a hold longer than the chunk uses it all and owes the rest
-    out, left, _ = hold_grasp(actions[3:], prev[3:], torch.tensor([6]), pose[3:], hold=2)
+    out, left, _, _ = hold_grasp(actions[3:], prev[3:], torch.tensor([6]), pose[3:], hold=2)
     assert out[0, :, 0].tolist() == [9.0] * 4 and left.tolist() == [2]
 
 
@@ -149,7 +150,7 @@ def test_hold_grasp_holds_a_close_at_the_first_step_and_one_after_a_carried_hold
     g = torch.tensor([[1, 1, 1, 1, 1], [1, -1, -1, 1, 1]], dtype=torch.float32)
     actions = torch.stack([torch.arange(5.0).expand(2, 5), g], -1)
     pose = torch.tensor([[0.0, 0.0], [7.0, 1.0]])
-    out, left, held = hold_grasp(actions, torch.tensor([False, False]), torch.tensor([0, 1]), pose, hold=2)
+    out, left, held, _ = hold_grasp(actions, torch.tensor([False, False]), torch.tensor([0, 1]), pose, hold=2)
     assert out[0, :, 0].tolist() == [0.0, 0.0, 0.0, 3.0, 4.0] and left[0] == 0
     assert out[1, :, 0].tolist() == [7.0, 1.0, 2.0, 3.0, 3.0] and left[1] == 1
     torch.testing.assert_close(held, torch.tensor([[0.0, 1.0], [3.0, 1.0]]))
@@ -169,7 +170,7 @@ def test_hold_grasp_snaps_a_close_near_the_grasp_target_onto_it():
         2, 1, 1
     )
     target = torch.tensor([[1.0, 0.5], [1.0, 2.0]])
-    out, left, pose = hold_grasp(
+    out, left, pose, snapped = hold_grasp(
         actions,
         torch.tensor([False, False]),
         torch.zeros(2, dtype=torch.long),
@@ -181,6 +182,7 @@ def test_hold_grasp_snaps_a_close_near_the_grasp_target_onto_it():
     assert out[0].tolist() == [[0.0, 0.0, -1.0]] + [[1.0, 0.5, 1.0]] * 3 and left[0] == 0
     assert out[1].tolist() == [[0.0, 0.0, -1.0]] + [[1.0, 0.0, 1.0]] * 3
     torch.testing.assert_close(pose, torch.tensor([[1.0, 0.5, 1.0], [1.0, 0.0, 1.0]]))
+    assert snapped.tolist() == [True, False]
     with pytest.raises(ValueError, match=r"Need grasp_target \(R, d\)"):
         hold_grasp(
             actions,

@@ -243,6 +243,11 @@ def test_square_convert_train_eval(tmp_path, monkeypatch):
     )
     lerobot_train.main()
     ckpt = tmp_path / "train" / "checkpoints" / "last" / "pretrained_model"
+    # the shipped grasp_snap: training learned the demos' grasp point (near the nut's handle, 5.5 cm out
+    # along its x axis) and saved it in both configs
+    point = json.loads((ckpt / "config.json").read_text())["grasp_point"]
+    assert json.loads((ckpt / "train_config.json").read_text())["policy"]["grasp_point"] == point
+    assert len(point) == 3 and 0.04 < point[0] < 0.07 and abs(point[1]) < 0.01
 
     out = tmp_path / "eval"
     assert (
@@ -264,3 +269,4 @@ def test_square_convert_train_eval(tmp_path, monkeypatch):
     assert json.loads((out / "eval_info.json").read_text())["overall"]["n_episodes"] == 1
     stats = json.loads((out / "ocr_stats.json").read_text())
     assert stats["recovery_chunks"] >= 1  # the nut on the other side of the table triggers recovery
+    assert "snapped_grasps" in stats  # counted (10 steps leave no time to grasp)

@@ -408,6 +408,7 @@ def run_eval(args: list[str]) -> dict:
             "handbacks": sum(sum(e["handbacks"]) for e in episodes),
             # whole batches (a batch's rows keep stepping until its last episode ends)
             "carried_chunks": sum(b.get("carried_chunks", 0) for b in batches),
+            "snapped_grasps": sum(b.get("snapped_grasps", 0) for b in batches),
             "threshold": batches[0]["threshold"] if batches else None,
             # per episode, in eval_info's order (batches run one after another, rows in env order)
             "started_ood": [bool(f) for b in batches for f in b["started_ood"]],

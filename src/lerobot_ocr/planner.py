@@ -187,7 +187,7 @@ def hold_grasp(
     gripper_index: int = -1,
     grasp_target: torch.Tensor | None = None,
     snap_radius: float = 0.0,
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Recovery actions that hold the hand still while the fingers close, as the demos do.
 
     actions (R, n, A): one executed chunk per row (absolute world-frame end-effector targets and a
@@ -201,8 +201,8 @@ def hold_grasp(
     action entries lie within snap_radius of the row's target is held at the target instead (that close
     action too; rotation and gripper entries as sampled): `ocr_joint`'s `grasp_snap`, the target being
     the demos' grasp point (`grasp.demo_grasp_point`) placed by the object's current pose.
-    Returns the (R, n, A) actions, the (R,) steps of the hold that run past the chunk's end, and the
-    (R, A) held actions (carried_pose where no new hold started).
+    Returns the (R, n, A) actions, the (R,) steps of the hold that run past the chunk's end, the (R, A)
+    held actions (carried_pose where no new hold started), and (R,) bool: the row's new hold was snapped.
 
     Raises:
         ValueError: actions is not (R, n, A), or prev_closed, carried_hold, carried_pose, grasp_target do
@@ -237,6 +237,7 @@ def hold_grasp(
     out = actions.clone()
     n = out.shape[1]
     left = torch.zeros(len(out), dtype=torch.long, device=out.device)
+    snapped = torch.zeros(len(out), dtype=torch.bool, device=out.device)
     pose = carried_pose.clone().to(out)
     for r in range(len(out)):
         start = min(int(carried_hold[r]), n)
@@ -257,6 +258,7 @@ def hold_grasp(
                 target = grasp_target[r].to(out)
                 if float(torch.linalg.vector_norm(out[r, k, :d] - target)) < snap_radius:
                     pose[r, :d] = target
+                    snapped[r] = True
             out[r, k : k + 1 + hold] = pose[r]
             left[r] = max(0, k + 1 + hold - n)
-    return out, left, pose
+    return out, left, pose, snapped

@@ -431,7 +431,7 @@ class OcrJointPolicy(PreTrainedPolicy):
         self._decisions: list[
             torch.Tensor
         ] = []  # per step, (B,) bool: the row got a new chunk (base or recovery)
-        self._n_chunks = self._n_handbacks = self._n_shortened = self._n_carried = 0
+        self._n_chunks = self._n_handbacks = self._n_shortened = self._n_carried = self._n_snapped = 0
 
     def _start_rows(self, b: int, device: torch.device) -> None:
         """A first step, or a batch of another size or device (a new rollout): all rows start on the base."""
@@ -532,7 +532,8 @@ class OcrJointPolicy(PreTrainedPolicy):
         steps owed past the chunk's end in `_hold_left`/`_hold_pose`; a carried chunk, a hand-back or a
         new episode drops them, and a row entering recovery counts as closed before (no hold at index 0).
         With `grasp_snap`, a sampled chunk's held close within grasp_snap of the demos' grasp point (placed
-        by the object's pose at this chunk's start) is held at that point; carried chunks are left alone.
+        by the object's pose at this chunk's start) is held at that point (`ocr_stats()["snapped_grasps"]`
+        counts them); carried chunks are left alone.
         """
         cfg = self.config
         idx = rows.nonzero().squeeze(-1)
@@ -584,7 +585,7 @@ class OcrJointPolicy(PreTrainedPolicy):
                 if cfg.grasp_snap is not None:  # the demos' grasp point where the object is now
                     point = torch.as_tensor(cfg.grasp_point, dtype=obs.frames.dtype, device=obs.frames.device)
                     target = transform_points(obs.frames[sub], point.expand(len(sub), 1, -1))[:, 0]
-                chunk, left, pose = hold_grasp(
+                chunk, left, pose, snapped = hold_grasp(
                     actions[:, :n],
                     prev,
                     carried,
@@ -595,6 +596,7 @@ class OcrJointPolicy(PreTrainedPolicy):
                     snap_radius=cfg.grasp_snap or 0.0,
                 )
                 actions = chunk
+                self._n_snapped += int(snapped.sum())
                 self._hold_left[sub] = left.to(self._hold_left)
                 self._hold_pose[sub] = pose.to(self._hold_pose)
             self._chunk[sub] = actions[:, :n].to(self._chunk)
@@ -760,6 +762,7 @@ class OcrJointPolicy(PreTrainedPolicy):
             "handbacks": self._n_handbacks,
             "shortened_plans": self._n_shortened,  # recovery plans capped at stall_delay after a stall
             "carried_chunks": self._n_carried,  # recovery chunks that carried a held object (carry_tolerance)
+            "snapped_grasps": self._n_snapped,  # held closes moved to the demos' grasp point (grasp_snap)
             "score": scores,
             "in_recovery": modes,
             "decisions": torch.stack(self._decisions).numpy() if self._decisions else None,

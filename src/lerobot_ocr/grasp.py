@@ -38,17 +38,16 @@ def first_close_positions(gripper: torch.Tensor, episode: torch.Tensor) -> torch
     return idx[first]
 
 
-def demo_grasp_point(
+def demo_grasp_points(
     ee: torch.Tensor, frames: torch.Tensor, gripper: torch.Tensor, episode: torch.Tensor
 ) -> torch.Tensor:
-    """The demos' grasp point: the mean over episodes of the end effector's position in the object frame
-    at the episode's first close command (`first_close_positions`).
+    """Each demo's grasp: the end effector's position in the object frame at the episode's first close
+    command (`first_close_positions`), one row per episode that closes.
 
     ee (N, d) world end-effector positions; frames (N, d+1, d+1) world-from-object poses; gripper (N,)
     gripper commands (closed when > 0); episode (N,) episode index, each episode's frames contiguous and
-    in time order. Units: the poses' (metres in robosuite). Returns (d,) in the object frame. The point
-    is where the hand measurably was when the close was commanded (not the commanded target), the mean
-    over episodes as measured on Square; one demo that first closes far off moves it by 1/E of its offset.
+    in time order. Units: the poses' (metres in robosuite). Returns (E, d) float64, object frame: where the
+    hand measurably was when the close was commanded (not the commanded target).
 
     Raises:
         ValueError: the shapes disagree, or no episode closes the gripper after an open frame (the
@@ -71,5 +70,13 @@ def demo_grasp_point(
             "so there is no grasp point to learn: check --policy.gripper_action_index, set "
             "--policy.grasp_point by hand, or leave --policy.grasp_snap None."
         )
-    local = transform_points(invert(frames[at].double()), ee[at].double()[:, None])[:, 0]
-    return local.mean(0).to(ee.dtype)
+    return transform_points(invert(frames[at].double()), ee[at].double()[:, None])[:, 0]
+
+
+def demo_grasp_point(
+    ee: torch.Tensor, frames: torch.Tensor, gripper: torch.Tensor, episode: torch.Tensor
+) -> torch.Tensor:
+    """The demos' grasp point: the mean of `demo_grasp_points` (same inputs and errors), (d,) in the object
+    frame in ee's dtype; the mean as measured on Square: one demo that first closes far off moves it by
+    1/E of its offset."""
+    return demo_grasp_points(ee, frames, gripper, episode).mean(0).to(ee.dtype)

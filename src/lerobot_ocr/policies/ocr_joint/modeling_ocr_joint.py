@@ -48,8 +48,8 @@ from lerobot_ocr.base_policy import (
     queued_actions,
 )
 from lerobot_ocr.dataset_columns import episode_last_positions, read_columns, window_positions
-from lerobot_ocr.geometry import invert, pose_defects, pose_to_matrix, transform_points
-from lerobot_ocr.grasp import demo_grasp_point, first_close_positions
+from lerobot_ocr.geometry import pose_defects, pose_to_matrix, transform_points
+from lerobot_ocr.grasp import demo_grasp_points
 from lerobot_ocr.inverse_policy import KeypointInversePolicy
 from lerobot_ocr.joint_density import JointKeypointDensity
 from lerobot_ocr.keypoints import pose_to_keypoints, resolve_keypoints
@@ -341,25 +341,21 @@ class OcrJointPolicy(PreTrainedPolicy):
         )
 
     def _learn_grasp_point(self) -> None:
-        """`grasp_snap`: the demos' grasp point from the training table (`grasp.demo_grasp_point`) into the
-        config, which lerobot-train saves in config.json and train_config.json."""
+        """`grasp_snap`: the demos' grasp point from the training table (the mean of
+        `grasp.demo_grasp_points`, as `demo_grasp_point`) into the config, which lerobot-train saves in
+        config.json and train_config.json."""
         cfg = self.config
         start, d = cfg.ee_position_start, cfg.object_dim
+        state = self._tbl_state
         gripper = self._tbl_action[:, cfg.gripper_action_index]
-        point = demo_grasp_point(
-            self._tbl_state[:, start : start + d], self._tbl_frames, gripper, self._tbl_last
-        )
-        cfg.grasp_point = [round(float(x), 6) for x in point]
-        at = first_close_positions(gripper, self._tbl_last)
-        local = transform_points(invert(self._tbl_frames[at]), self._tbl_state[at, None, start : start + d])[
-            :, 0
-        ]
+        points = demo_grasp_points(state[:, start : start + d], self._tbl_frames, gripper, self._tbl_last)
+        cfg.grasp_point = [round(float(x), 6) for x in points.mean(0).to(state.dtype)]
         logging.info(
             "ocr_joint: the demos' grasp point (object frame) is %s, from %d of %d episodes (sd %s)",
             cfg.grasp_point,
-            len(at),
+            len(points),
             len(self._tbl_last.unique()),
-            [round(float(x), 6) for x in local.std(0)] if len(at) > 1 else "-",
+            [round(float(x), 6) for x in points.std(0)] if len(points) > 1 else "-",
         )
 
     @torch.no_grad()

@@ -562,7 +562,8 @@ def evaluate(
     from results_md import update_section
     from summary import write as write_summary
 
-    from lerobot_ocr.pipeline import BIN, EVAL_SEED, PUSHT, Stages, run
+    from lerobot_ocr.pipeline import BIN, PUSHT, Stages, run
+    from lerobot_ocr.splits import DEV
 
     p = _cpu_profile(eval_batch)
     stage = Stages(work)
@@ -616,7 +617,7 @@ low-dim recipe on one {train_log["gpu"]}: U-Net {list(RECIPE["down_dims"])}, bat
 {train_log["steps_done"]} steps in {minutes:.1f} min, AdamW 1e-4, cosine with 500 warm-up steps, EMA
 weights (power 0.75); the inverse policy of the chain in `{source}` ({source_train["steps"]} steps,
 U-Net {source_train["policy"]["down_dims"]}), joined with `lerobot-ocr rebase`. {p["episodes"]} episodes
-per cell, env seeds {EVAL_SEED}+i, evaluated on CPU; {PUSHT.episode_length}-step episodes, success within
+per cell, env seeds {DEV.start}+i, evaluated on CPU; {PUSHT.episode_length}-step episodes, success within
 {PUSHT.step_budget} steps (strict) and within {PUSHT.decision_budget} policy decisions.
 
 {table}
@@ -682,10 +683,11 @@ def evaluate_square(
     from results_md import update_section
     from summary import write as write_summary
 
-    from lerobot_ocr.pipeline import EVAL_SEED, SQUARE, Chain, Stages
+    from lerobot_ocr.pipeline import SQUARE, Chain, Stages
+    from lerobot_ocr.splits import DEV
 
     p = dict(SQUARE.profiles["cpu"])
-    if eval_batch:  # episode i has seed EVAL_SEED + i whatever the batch
+    if eval_batch:  # episode i has seed DEV.start + i whatever the batch
         p["eval_batch"] = eval_batch
     stage = Stages(work)
     base = work / "base" / "checkpoints" / "last" / "pretrained_model"
@@ -752,7 +754,7 @@ Policy's low-dim recipe on one {gpu}, side by side in {minutes:.1f} min (batch {
 1e-4, cosine with 500 warm-up steps, EMA weights of power 0.75, seed {logs["base"].get("seed", 1000)}):
 the base U-Net {list(RECIPE["down_dims"])}, {logs["base"]["steps_done"]} steps; the inverse policy U-Net
 {list(kwargs["down_dims"])}, {logs["inverse"]["steps_done"]} steps (`configs/policy/ocr_joint_square.json`
-otherwise). {p["episodes"]} episodes per cell, env seeds {EVAL_SEED}+i, evaluated on CPU;
+otherwise). {p["episodes"]} episodes per cell, env seeds {DEV.start}+i, evaluated on CPU;
 {SQUARE.episode_length}-step episodes ({SQUARE.joint_episode_length} for ocr_joint), success within
 {SQUARE.step_budget} steps (strict) and within {SQUARE.decision_budget} calls of the reference's joint budget
 in env time (a recovery decision counts its steps / {SQUARE.recovery_call_steps}).
@@ -802,7 +804,7 @@ def _cpu_profile(eval_batch: int | None) -> dict:
     from lerobot_ocr.pipeline import PUSHT
 
     p = dict(PUSHT.profiles["cpu"])
-    if eval_batch:  # episode i has seed EVAL_SEED + i whatever the batch; larger batches use the CPU better
+    if eval_batch:  # episode i has seed DEV.start + i whatever the batch; larger batches use the CPU better
         p["eval_batch"] = eval_batch
     return p
 
@@ -857,7 +859,8 @@ def continual_evaluate(weights: Path, work: Path, eval_batch: int | None) -> Non
 
     from lerobot_ocr.continual.rebase import rebase
     from lerobot_ocr.eval_report import format_table, paired_outcomes
-    from lerobot_ocr.pipeline import EVAL_SEED, PUSHT, Stages, evaluate_cells
+    from lerobot_ocr.pipeline import PUSHT, Stages, evaluate_cells
+    from lerobot_ocr.splits import DEV
 
     p = _cpu_profile(eval_batch)
     here = work / "continual_episode"
@@ -950,7 +953,7 @@ The gpu row's chain (`{work}`): its joint policy collected the episodes; `aug_ba
 scratch on the demos plus those episodes with exactly the gpu base's training (recipe, seed,
 {train_log["steps_done"]} steps on one {train_log["gpu"]}), so the gpu base itself is the control (the same
 training on the demos alone); `aug_joint` = the joint policy with `aug_base` (`lerobot-ocr rebase`). Paper
-(Table III): {PAPER["pusht"]}. {p["episodes"]} episodes per cell, env seeds {EVAL_SEED}+i, evaluated on CPU.
+(Table III): {PAPER["pusht"]}. {p["episodes"]} episodes per cell, env seeds {DEV.start}+i, evaluated on CPU.
 
 {table}
 

@@ -27,7 +27,14 @@ import summary  # noqa: E402
 from results_md import update_section  # noqa: E402
 
 from lerobot_ocr.files import clear_workdir  # noqa: E402
-from lerobot_ocr.pipeline import EVAL_SEED, WORKDIR_MARKERS, Task, pictures, run_chain  # noqa: E402
+from lerobot_ocr.pipeline import (  # noqa: E402
+    WORKDIR_MARKERS,
+    Task,
+    evaluate_checkpoint,
+    pictures,
+    run_chain,
+)
+from lerobot_ocr.splits import SPLITS  # noqa: E402
 
 
 def parse_args(task: Task) -> argparse.Namespace:
@@ -37,6 +44,21 @@ def parse_args(task: Task) -> argparse.Namespace:
     )
     parser.add_argument("--workdir", default=None, help=f"default outputs/{task.name}_ocr_<profile>")
     parser.add_argument("--restart", action="store_true", help="delete the work dir first")
+    parser.add_argument(
+        "--from-checkpoint",
+        default=None,
+        metavar="DIR",
+        help="evaluate a finished ocr_joint checkpoint (e.g. checkpoints/pusht_cpu; its base in base/) "
+        "instead of rebuilding the chain: the cells only",
+    )
+    parser.add_argument(
+        "--split",
+        choices=["dev", "test"],
+        default=None,
+        help="the seeds the cells run on (lerobot_ocr.splits): default test with --from-checkpoint (the "
+        "published row), dev when the chain is rebuilt (a rebuilt chain is published through its "
+        "committed checkpoint: benchmarks/publish_checkpoint.py)",
+    )
     parser.add_argument(
         "--no-update", action="store_true", help="do not write benchmarks/results or RESULTS.md"
     )
@@ -55,6 +77,12 @@ def parse_args(task: Task) -> argparse.Namespace:
     if any(item.partition("=")[0] in ("region", "type", "obs_type") for item in args.env):
         parser.error("--env: region, type and obs_type are set by the pipeline (per cell / per profile)")
     args.env_args = [f"--env.{item}" for item in args.env]
+    args.split = args.split or ("test" if args.from_checkpoint else "dev")
+    if args.split == "test" and not args.from_checkpoint:
+        parser.error(
+            "--split test measures a published row, so it runs from the committed checkpoint: rebuild on "
+            "dev, publish with benchmarks/publish_checkpoint.py, then --from-checkpoint checkpoints/<name>."
+        )
     p = dict(task.profiles[args.profile])
     for item in args.set:
         key, _, value = item.partition("=")
@@ -97,17 +125,22 @@ def diagnosis_text(d: dict | None) -> str:
 
 
 def main(task: Task) -> None:
+    from lerobot_ocr.checkpoints import weights_digest
     from lerobot_ocr.cli import quiet_known_warnings
     from lerobot_ocr.eval_report import format_table
 
     quiet_known_warnings()  # LeRobot's torchcodec traceback in one line, as `lerobot-ocr` prints it
     args = parse_args(task)
     p = args.settings
-    work = Path(args.workdir or REPO / "outputs" / f"{task.name}_ocr_{args.profile}").resolve()
+    default = f"{task.name}_ocr_{args.profile}" + ("_published" if args.from_checkpoint else "")
+    work = Path(args.workdir or REPO / "outputs" / default).resolve()
     if args.restart:
         clear_workdir(work, WORKDIR_MARKERS)
     t_start = time.time()
-    chain = run_chain(task, p, work, args.env_args)
+    if args.from_checkpoint:
+        chain = evaluate_checkpoint(task, Path(args.from_checkpoint), p, work, args.env_args, args.split)
+    else:
+        chain = run_chain(task, p, work, args.env_args, args.split)
     table = format_table(chain.results)
     print("\n" + table)
     if args.no_update:
@@ -119,6 +152,10 @@ def main(task: Task) -> None:
         "profile": args.profile,
         "settings": p,
         "env": args.env,
+        "split": args.split,
+        "first_seed": SPLITS[args.split].start,
+        "checkpoint": args.from_checkpoint,
+        "weights_sha256": weights_digest(chain.ocr_ckpt),
         **chain.results,
         "handback_diagnosis": diagnosis(chain),
         "stage_seconds": chain.stage_seconds,
@@ -148,13 +185,19 @@ def main(task: Task) -> None:
             )
         )
     command = f".venv/bin/python benchmarks/{task.name}_ocr.py --profile {args.profile}"
+    command += f" --from-checkpoint {args.from_checkpoint}" if args.from_checkpoint else ""
+    command += f" --split {args.split}"
     command += (" --set " + " ".join(args.set)) if args.set else ""
     command += (" --env " + " ".join(args.env)) if args.env else ""
     base = (
         f"{base_kind}, diffusion U-Net {p['base_dims']}, {p['base_steps']} steps at batch {p['base_batch']}"
     )
     inverse = f"ocr_joint inverse policy {p['ocr_dims']}, {p['ocr_steps']} steps at batch {p['ocr_batch']}"
-    cells = f"{p['episodes']} episodes per cell, env seeds {EVAL_SEED}+i, device {p['device']}{protocol}"
+    seeds = SPLITS[args.split]
+    cells = (
+        f"{p['episodes']} episodes per cell on the {seeds.name} split (env seeds {seeds.start}+i), device "
+        f"{p['device']}{protocol}; weights sha256 {payload['weights_sha256'][:16]}"
+    )
     update_section(
         f"{task.title} ({args.profile})",
         f"""

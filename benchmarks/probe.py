@@ -35,7 +35,9 @@ REPO = HERE.parent
 sys.path[:0] = [str(HERE), str(REPO / "src")]
 from results_md import machine, update_section  # noqa: E402
 
+from lerobot_ocr.checkpoints import weights_digest  # noqa: E402
 from lerobot_ocr.pipeline import TASKS, clear_for_resume, eval_args, run  # noqa: E402
+from lerobot_ocr.splits import SPLITS, TestSplitRefused, refuse_test, refuse_test_command  # noqa: E402
 
 LEDGER = HERE / "results" / "probes.json"
 ARCHIVE = HERE / "results" / "probe_episodes"
@@ -130,25 +132,6 @@ def cell_command(
     return cmd
 
 
-def weights_digest(checkpoint: Path) -> str:
-    """sha256 hex of a checkpoint's `*.safetensors` files (names and bytes; ocr_joint's `base/` and the
-    processors' normalizer stats included): the trained networks, whatever the config says (an option
-    given on the command line or written in config.json is the probe's change, not another checkpoint).
-
-    Raises:
-        ValueError: no weights under `checkpoint`.
-    """
-    import hashlib
-
-    from lerobot_ocr.eval_resume import hash_files
-
-    if not any(checkpoint.rglob("*.safetensors")):
-        raise ValueError(f"{checkpoint} holds no *.safetensors weights: pass a pretrained_model folder.")
-    digest = hashlib.sha256()
-    hash_files(digest, checkpoint, "*.safetensors")
-    return digest.hexdigest()
-
-
 def keep_episodes(name: str, run_dir: Path, checkpoint: Path, archive: Path = ARCHIVE) -> Path | None:
     """Write `<archive>/<name>.json`: the run's `episodes.json` with its seeds (from the batch records),
     the digest of the checkpoint's weights (`weights_digest`) and the machine, atomically; None when the
@@ -186,6 +169,13 @@ def main() -> None:
     parser.add_argument("--env-type", default="pusht_ocr", choices=sorted(TASKS_BY_ENV))
     parser.add_argument("--region", default="ood", choices=["id", "ood"])
     parser.add_argument("--episodes", type=int, default=200)
+    parser.add_argument(
+        "--split",
+        default="dev",
+        choices=sorted(SPLITS),
+        help="the seeds to probe on (lerobot_ocr.splits); the test split is refused: it is kept for "
+        "published rows",
+    )
     parser.add_argument("--baseline", default=None, help="name of an earlier probe on the same seeds")
     parser.add_argument("--obs-type", default="environment_state_agent_pos")
     parser.add_argument(
@@ -200,6 +190,13 @@ def main() -> None:
     )
     args = parser.parse_args()
 
+    try:  # an experiment never sees the test split's starts, by --split or by a --seed in the change
+        refuse_test(SPLITS[args.split].start, args.episodes, "benchmarks/probe.py")
+        refuse_test_command(["--seed=" + str(SPLITS["dev"].start), *args.change], "benchmarks/probe.py")
+    except TestSplitRefused as e:
+        parser.error(str(e))
+    if args.split != "dev":
+        parser.error(f"--split {args.split}: probes run on the dev split (the other splits hold no eval).")
     probes = json.loads(LEDGER.read_text()) if LEDGER.exists() else []
     if any(p["name"] == args.name for p in probes):
         parser.error(f"a probe named {args.name!r} is recorded already; pick another --name")

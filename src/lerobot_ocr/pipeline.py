@@ -22,12 +22,12 @@ from pathlib import Path
 from typing import NamedTuple
 
 from lerobot_ocr.files import atomic_write, clear_workdir
+from lerobot_ocr.splits import DEMOS, EVAL_SPLITS, SPLITS
 
 BIN = Path(sys.executable).parent
 SRC = Path(__file__).resolve().parents[1]  # this checkout's `src` (or site-packages)
 CONFIGS = Path(__file__).resolve().parent / "configs" / "policy"
 LOWDIM_NORM = '{"VISUAL": "MEAN_STD", "STATE": "MIN_MAX", "ENV": "MIN_MAX", "ACTION": "MIN_MAX"}'
-EVAL_SEED = 100_000  # episode seeds EVAL_SEED + i, disjoint from the demos' 0..N
 CELLS = ("base_id", "base_ood", "joint_ood", "joint_id")  # (policy, start region) pairs
 WORKDIR_MARKERS = ("logs", "demos.json")  # what a chain's work dir holds (restart deletes only those)
 
@@ -70,7 +70,7 @@ class Task:
             "--repo-id",
             f"local/{self.name}_demos",
             "--seed",
-            "0",
+            str(DEMOS.start),
             "--overwrite",  # a run that finished but left no stage marker is made again
             *env_args,
         ]
@@ -84,7 +84,7 @@ class Chain(NamedTuple):
     eval_dirs: dict[str, Path]  # cell -> its lerobot-eval output dir
     base_ckpt: Path
     ocr_ckpt: Path
-    converted: Path  # the converted dataset the ocr_joint policy was trained on
+    converted: Path | None  # the converted dataset the ocr_joint policy was trained on (None: not at hand)
     stage_seconds: dict[str, float]
 
 
@@ -253,13 +253,28 @@ def base_train_args(
 
 
 def eval_args(
-    task: Task, policy: Path, region: str, p: dict, out: Path, env_args: list[str] = ()
+    task: Task,
+    policy: Path,
+    region: str,
+    p: dict,
+    out: Path,
+    env_args: list[str] = (),
+    split: str = "dev",
 ) -> list[str]:
-    """`lerobot-ocr eval` of one cell: fixed seeds, the task's protocol, `env_args` (`--env.<f>=<v>`).
+    """`lerobot-ocr eval` of one cell: the seeds of `split` (episode i: the split's first seed + i), the
+    task's protocol, `env_args` (`--env.<f>=<v>`).
 
     The episode cap is `task.joint_episode_length` when `policy` (a local pretrained_model folder) holds
     an ocr_joint config, else `task.episode_length`.
+
+    Raises:
+        ValueError: `split` is not an eval split, or it holds fewer seeds than `p["episodes"]`.
     """
+    if split not in EVAL_SPLITS:
+        raise ValueError(f"split must be one of {EVAL_SPLITS} (lerobot_ocr.splits), got {split!r}.")
+    seeds = SPLITS[split]
+    if not seeds.covers(seeds.start, p["episodes"]):
+        raise ValueError(f"{p['episodes']} episodes do not fit in the {seeds} split.")
     obs = "environment_state_agent_pos" if p["base"] == "lowdim" else "pixels_agent_pos"
     config = Path(policy) / "config.json"
     joint = config.exists() and json.loads(config.read_text()).get("type") == "ocr_joint"
@@ -274,7 +289,7 @@ def eval_args(
         f"--eval.n_episodes={p['episodes']}",
         f"--eval.batch_size={p['eval_batch']}",
         f"--policy.device={p['device']}",
-        f"--seed={EVAL_SEED}",
+        f"--seed={seeds.start}",
         f"--output_dir={out}",
         # CPU: one process; ten worker processes took 1.3x as long on 2 cores (RESULTS.md "Eval cell time").
         f"--eval.use_async_envs={'true' if p['device'] != 'cpu' else 'false'}",
@@ -313,7 +328,14 @@ def clear_for_resume(out: Path, cmd: list[str]) -> int:
 
 
 def evaluate_cell(
-    task: Task, policy: Path, region: str, p: dict, out: Path, log: Path, env_args: list[str] = ()
+    task: Task,
+    policy: Path,
+    region: str,
+    p: dict,
+    out: Path,
+    log: Path,
+    env_args: list[str] = (),
+    split: str = "dev",
 ) -> dict:
     """Run one cell (`eval_args`) into `out` and return its summary (`eval_report.summarize` of
     `eval_info.json`, plus `ocr_stats.json` / `episodes.json` where the run wrote them). An interrupted
@@ -324,14 +346,14 @@ def evaluate_cell(
     """
     from lerobot_ocr.eval_report import summarize
 
-    cmd = eval_args(task, policy, region, p, out, env_args)
+    cmd = eval_args(task, policy, region, p, out, env_args, split)
     clear_for_resume(out, cmd)
     run(cmd, log)
     read = (
         json.loads((out / f).read_text()) if (out / f).exists() else None
         for f in ("eval_info.json", "ocr_stats.json", "episodes.json")
     )
-    return summarize(*read)
+    return {**summarize(*read), "split": split, "first_seed": SPLITS[split].start}
 
 
 def chain_cells(base: Path, joint: Path, names) -> dict[str, tuple[Path, str]]:
@@ -340,20 +362,32 @@ def chain_cells(base: Path, joint: Path, names) -> dict[str, tuple[Path, str]]:
     return {name: (policies[name.split("_")[0]], name.split("_")[1]) for name in names}
 
 
+def cell_dir_name(name: str, split: str = "dev") -> str:
+    """A cell's stage and folder name in a chain's work dir: `eval_<cell>` on dev, `eval_<split>_<cell>`
+    otherwise (a dev and a test cell of the same checkpoint live side by side)."""
+    return f"eval_{name}" if split == "dev" else f"eval_{split}_{name}"
+
+
 def evaluate_cells(
-    stage: Stages, task: Task, cells: dict[str, tuple[Path, str]], p: dict, env_args: list[str] = ()
+    stage: Stages,
+    task: Task,
+    cells: dict[str, tuple[Path, str]],
+    p: dict,
+    env_args: list[str] = (),
+    split: str = "dev",
 ) -> dict[str, dict]:
-    """Each cell `name: (policy, region)` as the resumable stage `eval_<name>` of `stage`, run
-    (`evaluate_cell`) into `<stage.work>/eval_<name>` with its log in `<stage.work>/logs/`; returns each
-    cell's summary by name."""
+    """Each cell `name: (policy, region)` as the resumable stage `cell_dir_name(name, split)` of `stage`,
+    run (`evaluate_cell`) on `split`'s seeds into the folder of that name in `stage.work`, its log in
+    `<stage.work>/logs/`; returns each cell's summary by name."""
     results = {}
     for name, (policy, region) in cells.items():
+        dirname = cell_dir_name(name, split)
 
-        def evaluate(policy=policy, region=region, name=name):
-            out, log = stage.work / f"eval_{name}", stage.work / "logs" / f"eval_{name}.log"
-            return evaluate_cell(task, policy, region, p, out, log, env_args)
+        def evaluate(policy=policy, region=region, dirname=dirname):
+            out, log = stage.work / dirname, stage.work / "logs" / f"{dirname}.log"
+            return evaluate_cell(task, policy, region, p, out, log, env_args, split)
 
-        results[name] = stage(f"eval_{name}", evaluate)
+        results[name] = stage(dirname, evaluate)
     return results
 
 
@@ -446,8 +480,10 @@ def ocr_train_args(task: Task, p: dict, data: ChainData, base_ckpt: Path, out: P
     ]
 
 
-def run_chain(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> Chain:
-    """Run (or resume) the chain for profile settings `p` in `work`; evaluate `p["cells"]` (default all).
+def run_chain(task: Task, p: dict, work: Path, env_args: list[str] = (), split: str = "dev") -> Chain:
+    """Run (or resume) the chain for profile settings `p` in `work`; evaluate `p["cells"]` (default all)
+    on `split` (dev: every decision is made there; a row is published from the committed checkpoint,
+    `evaluate_checkpoint`).
 
     Raises:
         RuntimeError: a stage failed (its log's tail is in the message; a re-run resumes at that stage).
@@ -470,9 +506,39 @@ def run_chain(task: Task, p: dict, work: Path, env_args: list[str] = ()) -> Chai
     ocr_ckpt = ocr_out / "checkpoints" / "last" / "pretrained_model"
 
     cells = chain_cells(base_ckpt, ocr_ckpt, (name for name in CELLS if name in p.get("cells", CELLS)))
-    results = evaluate_cells(stage, task, cells, p, env_args)
-    eval_dirs = {name: work / f"eval_{name}" for name in cells}
+    results = evaluate_cells(stage, task, cells, p, env_args, split)
+    eval_dirs = {name: work / cell_dir_name(name, split) for name in cells}
     return Chain(results, eval_dirs, base_ckpt, ocr_ckpt, data.converted, stage.times)
+
+
+def evaluate_checkpoint(
+    task: Task, checkpoint: Path, p: dict, work: Path, env_args: list[str] = (), split: str = "test"
+) -> Chain:
+    """The chain's cells from a finished `ocr_joint` checkpoint (a `pretrained_model` folder bundling its
+    base in `base/`, e.g. the committed `checkpoints/pusht_cpu`), nothing trained: base cells run
+    `<checkpoint>/base`, joint cells `<checkpoint>`, on `split`'s seeds, resumable in `work`.
+
+    Raises:
+        FileNotFoundError: `checkpoint` is not an ocr_joint folder with its base in `base/`.
+        RuntimeError: a cell failed (its log's tail is in the message; a re-run resumes at that cell).
+    """
+    checkpoint = Path(checkpoint).resolve()
+    config = checkpoint / "config.json"
+    if not config.is_file() or json.loads(config.read_text()).get("type") != "ocr_joint":
+        raise FileNotFoundError(
+            f"{checkpoint} is not an ocr_joint pretrained_model folder (no config.json of type ocr_joint): "
+            "pass a published checkpoint (checkpoints/<task>_cpu) or a chain's "
+            "outputs/<chain>/ocr/checkpoints/last/pretrained_model."
+        )
+    if not (checkpoint / "base" / "config.json").is_file():
+        raise FileNotFoundError(
+            f"{checkpoint} has no bundled base in base/: re-save it with OcrJointPolicy.save_pretrained."
+        )
+    stage = Stages(work)
+    cells = chain_cells(checkpoint / "base", checkpoint, (n for n in CELLS if n in p.get("cells", CELLS)))
+    results = evaluate_cells(stage, task, cells, p, env_args, split)
+    eval_dirs = {name: work / cell_dir_name(name, split) for name in cells}
+    return Chain(results, eval_dirs, checkpoint / "base", checkpoint, None, stage.times)
 
 
 def success_chart(title: str, results: dict, path: Path) -> Path:
@@ -535,9 +601,11 @@ def _pusht_pictures(chain: Chain, out: Path, env_args: list[str]) -> list[Path]:
     from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
 
     policy = OcrJointPolicy.from_pretrained(chain.ocr_ckpt)
-    kps = read_columns(chain.converted, ["observation.object_keypoints"])[
-        "observation.object_keypoints"
-    ].reshape(-1, 9, 2)
+    kps = None  # the training frames' keypoints, drawn when the chain's converted dataset is at hand
+    if chain.converted is not None:
+        kps = read_columns(chain.converted, ["observation.object_keypoints"])[
+            "observation.object_keypoints"
+        ].reshape(-1, 9, 2)
     return [
         plot_density_field(
             policy.manifold,
@@ -562,9 +630,15 @@ def _square_pictures(chain: Chain, out: Path, env_args: list[str]) -> list[Path]
     from lerobot_ocr.policies.ocr_joint.modeling_ocr_joint import OcrJointPolicy
 
     policy = OcrJointPolicy.from_pretrained(chain.ocr_ckpt)
-    cols = read_columns(chain.converted, ["observation.object_keypoints", "observation.object_pose"])
-    kps = cols["observation.object_keypoints"].reshape(len(cols["observation.object_pose"]), -1, 3)
-    rest_z = float(np.median(cols["observation.object_pose"][:, 2]))
+    if chain.converted is not None:
+        cols = read_columns(chain.converted, ["observation.object_keypoints", "observation.object_pose"])
+        kps = cols["observation.object_keypoints"].reshape(len(cols["observation.object_pose"]), -1, 3)
+        rest_z = float(np.median(cols["observation.object_pose"][:, 2]))
+    else:  # a published checkpoint alone: the nut's typical height from the manifold's components
+        kps, m = None, policy.manifold
+        z, w = m.means_[..., 2].flatten().numpy(), m.weights_.flatten().numpy()
+        order = np.argsort(z)
+        rest_z = float(z[order][np.searchsorted(np.cumsum(w[order]), w.sum() / 2)])
     r = SquareOcrEnvConfig(**env_options("square", env_args)).nut_regions  # the boxes the run used
     ood_y = (r.id_y[0] + r.ood_dy[0], r.id_y[1] + r.ood_dy[1])
     files = [

@@ -37,7 +37,7 @@ from results_md import machine, update_section  # noqa: E402
 
 from lerobot_ocr.checkpoints import weights_digest  # noqa: E402
 from lerobot_ocr.pipeline import TASKS, clear_for_resume, eval_args, run  # noqa: E402
-from lerobot_ocr.splits import SPLITS, TestSplitRefused, refuse_test, refuse_test_command  # noqa: E402
+from lerobot_ocr.splits import EVAL_SPLITS, SPLITS, TestSplitRefused, refuse_test, refuse_test_command  # noqa: E402
 
 LEDGER = HERE / "results" / "probes.json"
 ARCHIVE = HERE / "results" / "probe_episodes"
@@ -172,8 +172,8 @@ def main() -> None:
     parser.add_argument(
         "--split",
         default="dev",
-        choices=sorted(SPLITS),
-        help="the seeds to probe on (lerobot_ocr.splits); the test split is refused: it is kept for "
+        choices=EVAL_SPLITS,
+        help="the seeds to probe on (lerobot_ocr.splits): dev; the test split is refused, it is kept for "
         "published rows",
     )
     parser.add_argument("--baseline", default=None, help="name of an earlier probe on the same seeds")
@@ -192,11 +192,11 @@ def main() -> None:
 
     try:  # an experiment never sees the test split's starts, by --split or by a --seed in the change
         refuse_test(SPLITS[args.split].start, args.episodes, "benchmarks/probe.py")
-        refuse_test_command(["--seed=" + str(SPLITS["dev"].start), *args.change], "benchmarks/probe.py")
+        refuse_test_command(
+            args.change, "benchmarks/probe.py", seed=SPLITS[args.split].start, episodes=args.episodes
+        )
     except TestSplitRefused as e:
         parser.error(str(e))
-    if args.split != "dev":
-        parser.error(f"--split {args.split}: probes run on the dev split (the other splits hold no eval).")
     probes = json.loads(LEDGER.read_text()) if LEDGER.exists() else []
     if any(p["name"] == args.name for p in probes):
         parser.error(f"a probe named {args.name!r} is recorded already; pick another --name")

@@ -38,6 +38,7 @@ sys.path[:0] = [str(REPO / "src")]
 from lerobot_ocr.checkpoints import (  # noqa: E402
     MANIFEST,
     file_digests,
+    ocr_joint_folder,
     read_manifest,
     store_half,
     weights_digest,
@@ -103,12 +104,7 @@ def publish(
         FileNotFoundError: `source` is not an ocr_joint folder with its base bundled in `base/`.
         FileExistsError: `<root>/<name>` exists and `replace` is False.
     """
-    source = Path(source).resolve()
-    config = source / "config.json"
-    if not config.is_file() or json.loads(config.read_text()).get("type") != "ocr_joint":
-        raise FileNotFoundError(f"{source} is not an ocr_joint pretrained_model folder (config.json).")
-    if not (source / "base" / "config.json").is_file():
-        raise FileNotFoundError(f"{source} has no bundled base in base/.")
+    source = ocr_joint_folder(source)
     dst = root / name
     if dst.exists() and not replace:
         raise FileExistsError(

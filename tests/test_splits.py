@@ -49,9 +49,17 @@ def test_the_test_split_is_refused_to_experiments_with_the_reason():
     refuse_test_command(["--seed=500000", "--eval.n_episodes=5", "--seed=100000"], "probe")
     with pytest.raises(TestSplitRefused):
         refuse_test_command(["--seed=100000", "--seed=500000"], "probe")
+    # a command without --seed runs from the caller's seed, for the caller's episodes
+    refuse_test_command(["--policy.fixed_delay=11"], "probe", seed=DEV.start, episodes=200)
+    with pytest.raises(TestSplitRefused):
+        refuse_test_command(["--policy.fixed_delay=11"], "probe", seed=TEST.start - 100, episodes=200)
+    with pytest.raises(TestSplitRefused):  # its own --seed, run for the caller's 200 episodes
+        refuse_test_command(["--seed=499900"], "probe", seed=DEV.start, episodes=200)
 
 
-@pytest.mark.parametrize("extra", [["--split", "test"], ["--", "--seed=500000"]])
+@pytest.mark.parametrize(
+    "extra", [["--split", "test"], ["--", "--seed=500000"], ["--episodes", "200", "--", "--seed=499900"]]
+)
 def test_probe_refuses_the_test_split(tmp_path, extra):
     cmd = [
         sys.executable,

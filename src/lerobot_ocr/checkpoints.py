@@ -27,6 +27,28 @@ WHERE_TO_GET = (
 )
 
 
+def ocr_joint_folder(folder: Path) -> Path:
+    """`folder` resolved, after checking it is an `ocr_joint` `pretrained_model` folder (config.json of type
+    ocr_joint) that bundles its base in `base/` (what `OcrJointPolicy.save_pretrained` writes).
+
+    Raises:
+        FileNotFoundError: it is not; the message says what to pass instead.
+    """
+    folder = Path(folder).resolve()
+    config = folder / "config.json"
+    if not config.is_file() or json.loads(config.read_text()).get("type") != "ocr_joint":
+        raise FileNotFoundError(
+            f"{folder} is not an ocr_joint pretrained_model folder (no config.json of type ocr_joint): "
+            "pass a published checkpoint (checkpoints/<task>_cpu) or a chain's "
+            "outputs/<chain>/ocr/checkpoints/last/pretrained_model."
+        )
+    if not (folder / "base" / "config.json").is_file():
+        raise FileNotFoundError(
+            f"{folder} has no bundled base in base/: re-save it with OcrJointPolicy.save_pretrained."
+        )
+    return folder
+
+
 def sha256_file(path: Path) -> str:
     """sha256 hex of one file's bytes."""
     h = hashlib.sha256()

@@ -522,18 +522,9 @@ def evaluate_checkpoint(
         FileNotFoundError: `checkpoint` is not an ocr_joint folder with its base in `base/`.
         RuntimeError: a cell failed (its log's tail is in the message; a re-run resumes at that cell).
     """
-    checkpoint = Path(checkpoint).resolve()
-    config = checkpoint / "config.json"
-    if not config.is_file() or json.loads(config.read_text()).get("type") != "ocr_joint":
-        raise FileNotFoundError(
-            f"{checkpoint} is not an ocr_joint pretrained_model folder (no config.json of type ocr_joint): "
-            "pass a published checkpoint (checkpoints/<task>_cpu) or a chain's "
-            "outputs/<chain>/ocr/checkpoints/last/pretrained_model."
-        )
-    if not (checkpoint / "base" / "config.json").is_file():
-        raise FileNotFoundError(
-            f"{checkpoint} has no bundled base in base/: re-save it with OcrJointPolicy.save_pretrained."
-        )
+    from lerobot_ocr.checkpoints import ocr_joint_folder
+
+    checkpoint = ocr_joint_folder(checkpoint)
     stage = Stages(work)
     cells = chain_cells(checkpoint / "base", checkpoint, (n for n in CELLS if n in p.get("cells", CELLS)))
     results = evaluate_cells(stage, task, cells, p, env_args, split)

@@ -100,12 +100,15 @@ def refuse_test(first: int, n: int, who: str) -> None:
         )
 
 
-def refuse_test_command(cmd: list[str], who: str) -> None:
-    """`refuse_test` on the seeds a command line runs (`command_seeds`); a command without `--seed` passes.
+def refuse_test_command(cmd: list[str], who: str, seed: int | None = None, episodes: int = 1) -> None:
+    """`refuse_test` on the seeds a command line runs (`command_seeds`): its own `--seed` and
+    `--eval.n_episodes`, else `seed` and `episodes` (what the caller runs it with); a command with no seed
+    from either passes.
 
     Raises:
         TestSplitRefused: the command's seeds reach the test split.
     """
-    seeds = command_seeds(cmd)
+    defaults = [f"--eval.n_episodes={episodes}"] + ([] if seed is None else [f"--seed={seed}"])
+    seeds = command_seeds([*defaults, *cmd])
     if seeds is not None:
         refuse_test(*seeds, who)

@@ -51,6 +51,7 @@ from lerobot_ocr.pipeline import (  # noqa: E402
     train,
     trainer,
 )  # noqa: E402
+from lerobot_ocr.splits import COLLECT  # noqa: E402
 
 # Our stages' settings per profile (the chain's come from the task's profile of the same name).
 PROFILES = {
@@ -61,7 +62,7 @@ PAPER = {  # Table III (numbers in summary.CONTINUAL_PAPER): base ID / OOD, then
     task: "base {:.2f} / {:.2f} → augmented base {:.2f} / {:.2f}".format(*rates)
     for task, rates in CONTINUAL_PAPER.items()
 }
-COLLECT_SEED = 300_000
+COLLECT_SEED = COLLECT.start  # lerobot_ocr.splits
 
 
 def parse_args() -> argparse.Namespace:

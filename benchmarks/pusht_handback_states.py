@@ -30,8 +30,9 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path[:0] = [str(REPO / "src")]
+from lerobot_ocr.splits import DEV  # noqa: E402
 
-OOD_SEED = 100000
+OOD_SEED = DEV.start  # an experiment: the dev split (lerobot_ocr.splits)
 MAX_CHUNKS = 60
 
 

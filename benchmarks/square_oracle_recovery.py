@@ -39,8 +39,9 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path[:0] = [str(REPO / "src")]
+from lerobot_ocr.splits import DEV  # noqa: E402
 
-OOD_SEED = 100000
+OOD_SEED = DEV.start  # an experiment: the dev split (lerobot_ocr.splits)
 HELD_LIFT = 0.02  # m the nut must rise in the expert's lift before the carry starts (the grasp holds)
 HELD_DISTANCE = 0.03  # m from the grip site to the nut's handle (the expert grasps there): held
 MAX_RECOVERY = 700  # oracle steps before giving up (30 calls hold 1080 recovery steps)

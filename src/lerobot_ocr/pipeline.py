@@ -1,6 +1,6 @@
 """The whole OCR chain on a sim task: demos -> base policy -> convert -> ocr_joint -> evaluation.
 
-`lerobot-ocr demo` runs it on Push-T at a small size (minutes on a laptop CPU); the benchmark
+`lerobot-ocr demo --from-scratch` runs it on Push-T at a small size (minutes on a laptop CPU); the benchmark
 scripts (`benchmarks/pusht_ocr.py`, `square_ocr.py`) run the benchmark profiles and publish them.
 Every stage runs the user-facing tools (`lerobot-ocr generate` / `convert` / `eval`, `lerobot-train`;
 low-dim bases train through `lerobot_ocr.train_in_memory`, lerobot-train's own loop with the dataset
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
-from lerobot_ocr.files import atomic_write, clear_workdir
+from lerobot_ocr.files import atomic_write
 from lerobot_ocr.splits import DEMOS, EVAL_SPLITS, SPLITS
 
 BIN = Path(sys.executable).parent
@@ -30,6 +30,7 @@ CONFIGS = Path(__file__).resolve().parent / "configs" / "policy"
 LOWDIM_NORM = '{"VISUAL": "MEAN_STD", "STATE": "MIN_MAX", "ENV": "MIN_MAX", "ACTION": "MIN_MAX"}'
 CELLS = ("base_id", "base_ood", "joint_ood", "joint_id")  # (policy, start region) pairs
 WORKDIR_MARKERS = ("logs", "demos.json")  # what a chain's work dir holds (restart deletes only those)
+CHECKPOINT_MARKER = "checkpoint.json"  # `evaluate_checkpoint`: the checkpoint a work dir's cells measure
 
 
 @dataclass
@@ -88,8 +89,10 @@ class Chain(NamedTuple):
     stage_seconds: dict[str, float]
 
 
-def run(cmd: list[str], log: Path) -> None:
+def run(cmd: list[str], log: Path, progress: str | None = None) -> None:
     """Run one stage command, its output into `log`; this checkout's sources first on PYTHONPATH.
+    `progress`: a label; while the command runs, its latest progress bar (tqdm's, from the log) is shown
+    on one terminal line after it.
 
     Raises:
         RuntimeError: the command failed; the message holds the log's last lines.
@@ -108,10 +111,27 @@ def run(cmd: list[str], log: Path) -> None:
     with open(log, "w") as f:
         f.write(" ".join(cmd) + "\n\n")
         f.flush()
-        proc = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, env=env)
+        proc = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=env)
+        while proc.poll() is None:
+            try:
+                proc.wait(timeout=1.0)
+            except subprocess.TimeoutExpired:
+                if progress:
+                    print(f"\r  {progress}: {last_progress_bar(log)}"[:110].ljust(110), end="", flush=True)
+        if progress:
+            print()
     if proc.returncode != 0:
         tail = log.read_text().splitlines()[-25:]
         raise RuntimeError(f"Stage command failed ({proc.returncode}): {' '.join(cmd)}\n" + "\n".join(tail))
+
+
+def last_progress_bar(log: Path, tail_bytes: int = 4096) -> str:
+    """The last tqdm progress bar ("…%|…|…") written to `log`, "" when there is none yet."""
+    with open(log, "rb") as f:
+        f.seek(max(0, log.stat().st_size - tail_bytes))
+        text = f.read().decode(errors="replace")
+    bars = [b.strip() for b in text.replace("\n", "\r").split("\r") if "%|" in b]
+    return bars[-1] if bars else ""
 
 
 class Stages:
@@ -260,9 +280,10 @@ def eval_args(
     out: Path,
     env_args: list[str] = (),
     split: str = "dev",
+    offset: int = 0,
 ) -> list[str]:
-    """`lerobot-ocr eval` of one cell: the seeds of `split` (episode i: the split's first seed + i), the
-    task's protocol, `env_args` (`--env.<f>=<v>`).
+    """`lerobot-ocr eval` of one cell: the seeds of `split` (episode i: the split's first seed + `offset` +
+    i), the task's protocol, `env_args` (`--env.<f>=<v>`).
 
     The episode cap is `task.joint_episode_length` when `policy` (a local pretrained_model folder) holds
     an ocr_joint config, else `task.episode_length`.
@@ -273,8 +294,8 @@ def eval_args(
     if split not in EVAL_SPLITS:
         raise ValueError(f"split must be one of {EVAL_SPLITS} (lerobot_ocr.splits), got {split!r}.")
     seeds = SPLITS[split]
-    if not seeds.covers(seeds.start, p["episodes"]):
-        raise ValueError(f"{p['episodes']} episodes do not fit in the {seeds} split.")
+    if not seeds.covers(seeds.start + offset, p["episodes"]):
+        raise ValueError(f"{p['episodes']} episodes from offset {offset} do not fit in the {seeds} split.")
     obs = "environment_state_agent_pos" if p["base"] == "lowdim" else "pixels_agent_pos"
     config = Path(policy) / "config.json"
     joint = config.exists() and json.loads(config.read_text()).get("type") == "ocr_joint"
@@ -289,11 +310,12 @@ def eval_args(
         f"--eval.n_episodes={p['episodes']}",
         f"--eval.batch_size={p['eval_batch']}",
         f"--policy.device={p['device']}",
-        f"--seed={seeds.start}",
+        f"--seed={seeds.start + offset}",
         f"--output_dir={out}",
         # CPU: one process; ten worker processes took 1.3x as long on 2 cores (RESULTS.md "Eval cell time").
         f"--eval.use_async_envs={'true' if p['device'] != 'cpu' else 'false'}",
-        "--ocr.videos=1",  # the pictures keep episode 0's; rendering 10 sync envs costs more than their sim
+        # the pictures keep episode 0's (the demo: all); rendering 10 sync envs costs more than their sim
+        f"--ocr.videos={p.get('videos', 1)}",
         "--ocr.resume=true",  # an interrupted cell goes on from its last finished batch (`clear_for_resume`)
         *task.eval_overrides,
         *([f"--env.episode_length={length}"] if length else []),
@@ -336,24 +358,26 @@ def evaluate_cell(
     log: Path,
     env_args: list[str] = (),
     split: str = "dev",
+    offset: int = 0,
 ) -> dict:
-    """Run one cell (`eval_args`) into `out` and return its summary (`eval_report.summarize` of
-    `eval_info.json`, plus `ocr_stats.json` / `episodes.json` where the run wrote them). An interrupted
-    cell goes on from its last finished batch (`clear_for_resume`); anything else in `out` is removed.
+    """Run one cell (`eval_args`, from seed offset `offset` in `split`) into `out` and return its summary
+    (`eval_report.summarize` of `eval_info.json`, plus `ocr_stats.json` / `episodes.json` where the run
+    wrote them). An interrupted cell goes on from its last finished batch (`clear_for_resume`); anything
+    else in `out` is removed.
 
     Raises:
         RuntimeError: the eval failed (see `run`).
     """
     from lerobot_ocr.eval_report import summarize
 
-    cmd = eval_args(task, policy, region, p, out, env_args, split)
+    cmd = eval_args(task, policy, region, p, out, env_args, split, offset)
     clear_for_resume(out, cmd)
-    run(cmd, log)
+    run(cmd, log, progress=out.name if p.get("progress") else None)
     read = (
         json.loads((out / f).read_text()) if (out / f).exists() else None
         for f in ("eval_info.json", "ocr_stats.json", "episodes.json")
     )
-    return {**summarize(*read), "split": split, "first_seed": SPLITS[split].start}
+    return {**summarize(*read), "split": split, "first_seed": SPLITS[split].start + offset}
 
 
 def chain_cells(base: Path, joint: Path, names) -> dict[str, tuple[Path, str]]:
@@ -520,11 +544,21 @@ def evaluate_checkpoint(
 
     Raises:
         FileNotFoundError: `checkpoint` is not an ocr_joint folder with its base in `base/`.
+        FileExistsError: `work` holds cells of another checkpoint (its weights digest, `checkpoint.json`).
         RuntimeError: a cell failed (its log's tail is in the message; a re-run resumes at that cell).
     """
-    from lerobot_ocr.checkpoints import ocr_joint_folder
+    from lerobot_ocr.checkpoints import ocr_joint_folder, weights_digest
 
     checkpoint = ocr_joint_folder(checkpoint)
+    work.mkdir(parents=True, exist_ok=True)
+    (work / "logs").mkdir(exist_ok=True)  # the work dir marker (`WORKDIR_MARKERS`), so --restart may clear it
+    mark, digest = work / CHECKPOINT_MARKER, weights_digest(checkpoint)
+    if mark.exists() and json.loads(mark.read_text())["weights_sha256"] != digest:
+        raise FileExistsError(
+            f"{work} holds the cells of another checkpoint ({json.loads(mark.read_text())['checkpoint']}): "
+            "pass --restart to measure this one there, or another work dir."
+        )
+    mark.write_text(json.dumps({"checkpoint": str(checkpoint), "weights_sha256": digest}, indent=2))
     stage = Stages(work)
     cells = chain_cells(checkpoint / "base", checkpoint, (n for n in CELLS if n in p.get("cells", CELLS)))
     results = evaluate_cells(stage, task, cells, p, env_args, split)
@@ -789,30 +823,3 @@ SQUARE = Task(
 )
 
 TASKS = {task.name: task for task in (PUSHT, SQUARE)}
-
-
-def demo(workdir: str | Path = "outputs/demo", restart: bool = False) -> Chain:
-    """`lerobot-ocr demo`: the Push-T chain at the `demo` size; prints the table and the pictures' paths."""
-    from lerobot_ocr.eval_report import format_start_split, format_table
-
-    work = Path(workdir).resolve()
-    if restart:
-        clear_workdir(work, WORKDIR_MARKERS)
-    start = time.time()
-    chain = run_chain(PUSHT, PUSHT.profiles["demo"], work)
-    files = pictures(PUSHT, chain, work / "pictures")
-    print(
-        f"\nPush-T, {PUSHT.profiles['demo']['demos']} demos, tiny CPU-sized networks (see `benchmarks/` "
-        "for the real rows):"
-    )
-    print(format_table(chain.results))
-    split = format_start_split(chain.results)
-    if split:
-        print(split)
-    print(
-        f"\nStages {sum(chain.stage_seconds.values()) / 60:.1f} min (this run "
-        f"{(time.time() - start) / 60:.1f} min). Pictures and videos:",
-        *files,
-        sep="\n  ",
-    )
-    return chain

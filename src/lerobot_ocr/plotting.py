@@ -135,11 +135,13 @@ def plot_density_field(
 
 
 def video_frame_strip(
-    video: str | Path, path: str | Path, n_frames: int = 6, title: str | None = None
+    video: str | Path | dict[str, str | Path], path: str | Path, n_frames: int = 6, title: str | None = None
 ) -> Path:
-    """Save a PNG of `n_frames` evenly spaced frames (first and last included) of a video, in one row.
+    """Save a PNG of `n_frames` evenly spaced frames (first and last included) of a video, in one row; of
+    each video of a {label: video} mapping, one labelled row per video (each spaced over its own length).
 
     Raises:
+        FileNotFoundError: a video does not exist.
         ValueError: a video without frames.
     """
     import av
@@ -148,17 +150,26 @@ def video_frame_strip(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    with av.open(str(video)) as container:
-        fps = float(container.streams.video[0].average_rate or 1)
-        frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
-    if not frames:
-        raise ValueError(f"{video} has no frames.")
-    idx = np.unique(np.linspace(0, len(frames) - 1, n_frames).round().astype(int))
-    fig, axes = plt.subplots(1, len(idx), figsize=(2.2 * len(idx), 2.5), dpi=100, squeeze=False)
-    for ax, i in zip(axes[0], idx):
-        ax.imshow(frames[i])
-        ax.set_title(f"t = {i / fps:.1f} s", fontsize=9)
-        ax.axis("off")
+    videos = video if isinstance(video, dict) else {None: video}
+    rows = {}
+    for label, v in videos.items():
+        if not Path(v).exists():
+            raise FileNotFoundError(f"No video at {v}.")
+        with av.open(str(v)) as container:
+            fps = float(container.streams.video[0].average_rate or 1)
+            frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
+        if not frames:
+            raise ValueError(f"{v} has no frames.")
+        idx = np.unique(np.linspace(0, len(frames) - 1, n_frames).round().astype(int))
+        rows[label] = (fps, [(i, frames[i]) for i in idx])
+    cols = max(len(r[1]) for r in rows.values())
+    fig, axes = plt.subplots(len(rows), cols, figsize=(2.2 * cols, 2.5 * len(rows)), dpi=100, squeeze=False)
+    for row, (label, (fps, picked)) in zip(axes, rows.items()):
+        for ax in row:
+            ax.axis("off")
+        for ax, (i, frame) in zip(row, picked):
+            ax.imshow(frame)
+            ax.set_title(f"{label + ', ' if label else ''}t = {i / fps:.1f} s", fontsize=9)
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()

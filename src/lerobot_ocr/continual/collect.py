@@ -37,9 +37,10 @@ from pathlib import Path
 import numpy as np
 
 from lerobot_ocr.constants import OCR_IN_RECOVERY
+from lerobot_ocr.splits import COLLECT
 
 KEEP = ("episode", "recovery", "all")
-COLLECT_SEED = 300_000
+COLLECT_SEED = COLLECT.start  # lerobot_ocr.splits: disjoint from the demos, dev and test seeds
 RECOVERY_FEATURE = {OCR_IN_RECOVERY: {"dtype": "bool", "shape": (1,), "names": None}}
 
 

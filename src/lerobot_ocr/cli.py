@@ -57,7 +57,7 @@ def _demo(args: argparse.Namespace) -> int:
                 episodes=args.episodes or DEMO_EPISODES,
                 restart=args.restart,
             )
-        except (FileNotFoundError, FileExistsError) as e:
+        except (FileNotFoundError, FileExistsError, ValueError) as e:  # what to pass or restore instead
             raise SystemExit(str(e)) from None
         return 0
     from lerobot_ocr.manifold_demo import run_manifold_demo

@@ -45,14 +45,13 @@ def resolve_checkpoint(task: str, checkpoint: str | Path | None = None) -> Path:
     from huggingface_hub import snapshot_download
 
     try:
-        return ocr_joint_folder(snapshot_download(repo_id))
-    except FileNotFoundError:
-        raise
+        folder = snapshot_download(repo_id)
     except Exception as e:  # offline, unknown repo, no access: say so and where to get one
         raise FileNotFoundError(
             f"--checkpoint {repo_id}: could not fetch it from the hub ({type(e).__name__}: {e}). "
             + WHERE_TO_GET
         ) from e
+    return ocr_joint_folder(folder)
 
 
 def solved_per_episode(results: dict, eval_dirs: dict) -> dict[str, list[bool]]:

@@ -1,11 +1,11 @@
 """`lerobot-ocr demo`: a published checkpoint's base and its `ocr_joint` wrapper on the same OOD starts.
 
 The default runs `checkpoints/pusht_cpu` (the checkpoint behind the published Push-T row, committed in
-the repository) on the first `DEMO_EPISODES` starts of the test split, the same starts (and, with the same
-batch size, the same episodes) as the first episodes of the published row: nothing is trained. It prints
-the table, and writes the success chart, the density field, and the videos plus a frame strip of one start
-where the base fails and `ocr_joint` recovers and finishes. `--from-scratch` runs the old tiny chain
-(demos -> base -> convert -> ocr_joint in minutes), whose networks are too small to succeed.
+the repository) on the first `DEMO_EPISODES` starts of the test split, the starts of the published row's
+first episodes: nothing is trained. It prints the table, and writes the success chart, the density field,
+and the videos plus a frame strip of one start where the base fails and `ocr_joint` recovers and finishes.
+`--from-scratch` runs the tiny chain instead (demos -> base -> convert -> ocr_joint in minutes), whose
+networks are too small to succeed.
 """
 
 from __future__ import annotations

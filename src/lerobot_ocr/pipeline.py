@@ -544,12 +544,15 @@ def evaluate_checkpoint(
 
     Raises:
         FileNotFoundError: `checkpoint` is not an ocr_joint folder with its base in `base/`.
-        FileExistsError: `work` holds cells of another checkpoint (its weights digest, `checkpoint.json`).
+        FileExistsError: `work` holds cells of another checkpoint (its weights digest, `checkpoint.json`),
+            or files that are not a work dir's (nothing is written there).
         RuntimeError: a cell failed (its log's tail is in the message; a re-run resumes at that cell).
     """
     from lerobot_ocr.checkpoints import ocr_joint_folder, weights_digest
 
     checkpoint = ocr_joint_folder(checkpoint)
+    if work.is_dir() and any(work.iterdir()) and not any((work / m).exists() for m in WORKDIR_MARKERS):
+        raise FileExistsError(f"{work} holds files that are not a work dir's: pick another work dir.")
     work.mkdir(parents=True, exist_ok=True)
     (work / "logs").mkdir(exist_ok=True)  # the work dir marker (`WORKDIR_MARKERS`), so --restart may clear it
     mark, digest = work / CHECKPOINT_MARKER, weights_digest(checkpoint)
@@ -712,7 +715,7 @@ PUSHT = Task(
     decision_budget=60,
     episode_length=960,
     profiles={
-        # `lerobot-ocr demo`: the whole chain in minutes; the effect shows in reward, not yet in success
+        # `lerobot-ocr demo --from-scratch`: the whole chain in minutes; too small to succeed
         "demo": {
             "demos": 20,
             "base": "lowdim",

@@ -26,6 +26,7 @@ sys.path[:0] = [str(HERE), str(REPO / "src")]
 import summary  # noqa: E402
 from results_md import update_section  # noqa: E402
 
+from lerobot_ocr.checkpoints import published  # noqa: E402
 from lerobot_ocr.files import clear_workdir  # noqa: E402
 from lerobot_ocr.pipeline import (  # noqa: E402
     WORKDIR_MARKERS,
@@ -83,6 +84,19 @@ def parse_args(task: Task) -> argparse.Namespace:
             "--split test measures a published row, so it runs from the committed checkpoint: rebuild on "
             "dev, publish with benchmarks/publish_checkpoint.py, then --from-checkpoint checkpoints/<name>."
         )
+    if args.split == "test":  # a published row: the committed checkpoint of this row, as published
+        name = f"{task.name}_{args.profile}"
+        if args.set or args.env:
+            parser.error("--split test measures a published row as it was published: no --set, no --env.")
+        try:
+            folder = published(name)
+        except (FileNotFoundError, ValueError) as e:
+            parser.error(f"--split test: {e}")
+        if Path(args.from_checkpoint).resolve() != folder.resolve():
+            parser.error(
+                f"--split test measures the published row {name} from its committed checkpoint: "
+                f"--from-checkpoint {folder.relative_to(REPO)} (other checkpoints run on --split dev)."
+            )
     p = dict(task.profiles[args.profile])
     for item in args.set:
         key, _, value = item.partition("=")
@@ -94,6 +108,12 @@ def parse_args(task: Task) -> argparse.Namespace:
         p[key] = type(p[key])(value)
     args.settings = p
     return args
+
+
+def results_stem(task: Task, profile: str, split: str) -> str:
+    """The results file (and figures folder) of a row: `<task>_<profile>` for the published row (test
+    split), `<task>_<profile>_<split>` otherwise, so that a rebuild on dev never replaces a published row."""
+    return f"{task.name}_{profile}" + ("" if split == "test" else f"_{split}")
 
 
 def diagnosis(chain) -> dict | None:
@@ -145,7 +165,8 @@ def main(task: Task) -> None:
     print("\n" + table)
     if args.no_update:
         return
-    figure_dir = HERE / "results" / f"{task.name}_{args.profile}"
+    stem = results_stem(task, args.profile, args.split)
+    figure_dir = HERE / "results" / stem
     files = [str(f.relative_to(REPO)) for f in pictures(task, chain, figure_dir, args.env_args)]
     payload = {
         "benchmark": f"{task.name}_ocr",
@@ -165,7 +186,7 @@ def main(task: Task) -> None:
         "date": dt.date.today().isoformat(),
         "files": files,
     }
-    (HERE / "results" / f"{task.name}_{args.profile}.json").write_text(json.dumps(payload, indent=2) + "\n")
+    (HERE / "results" / f"{stem}.json").write_text(json.dumps(payload, indent=2) + "\n")
     summary.write()  # the summary atop RESULTS.md and in the README
     base_kind = task.lowdim_description if p["base"] == "lowdim" else "image base"
     stages_txt = ", ".join(f"{k} {v / 60:.1f} min" for k, v in chain.stage_seconds.items())
@@ -199,7 +220,7 @@ def main(task: Task) -> None:
         f"{p['device']}{protocol}; weights sha256 {payload['weights_sha256'][:16]}"
     )
     update_section(
-        f"{task.title} ({args.profile})",
+        f"{task.title} ({args.profile}" + (")" if args.split == "test" else f", {args.split} split)"),
         f"""
 {p["demos"]} scripted ID demos; {base};
 {inverse} (configs/policy/{task.policy_config} otherwise);

@@ -206,8 +206,8 @@ def render(manifest: dict) -> str:
         "",
         "Written by `benchmarks/publish_checkpoint.py` from `manifest.json` (the machine-readable record: "
         "sha256 of every file). Each folder is an `ocr_joint` `pretrained_model` as LeRobot saves it, its "
-        "base bundled in `base/`, weights only; `tests/test_checkpoints.py` checks every digest and runs "
-        "one episode of each.",
+        "base bundled in `base/`, weights only; `tests/test_published_checkpoints.py` checks every digest "
+        "and runs one episode of each.",
         "",
         "```bash",
         "lerobot-eval --policy.path=checkpoints/pusht_cpu --env.type=pusht_ocr --env.region=ood \\",

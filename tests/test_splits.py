@@ -55,6 +55,10 @@ def test_the_test_split_is_refused_to_experiments_with_the_reason():
         refuse_test_command(["--policy.fixed_delay=11"], "probe", seed=TEST.start - 100, episodes=200)
     with pytest.raises(TestSplitRefused):  # its own --seed, run for the caller's 200 episodes
         refuse_test_command(["--seed=499900"], "probe", seed=DEV.start, episodes=200)
+    with pytest.raises(
+        TestSplitRefused
+    ):  # `--seed N` as draccus reads it too, for lerobot-eval's 50 episodes
+        refuse_test_command(["--seed", "499990"], "probe")
 
 
 @pytest.mark.parametrize(
@@ -73,3 +77,20 @@ def test_probe_refuses_the_test_split(tmp_path, extra):
     assert proc.returncode == 2, proc.stderr
     assert "test split" in proc.stderr and "published rows" in proc.stderr
     assert not (tmp_path / "outputs").exists()
+
+
+@pytest.mark.parametrize(
+    "extra, says",
+    [([], "checkpoints/"), (["--set", "episodes=20"], "no --set"), (["--env", "region_axis=1"], "no --env")],
+)
+def test_a_test_split_row_runs_only_from_its_published_checkpoint(tmp_path, extra, says):
+    cmd = [sys.executable, str(REPO / "benchmarks" / "pusht_ocr.py"), "--profile", "cpu", "--split", "test"]
+    ckpt = tmp_path if not extra else REPO / "checkpoints" / "pusht_cpu"  # another folder; the published one
+    proc = subprocess.run(
+        [*cmd, "--from-checkpoint", str(ckpt), "--workdir", str(tmp_path / "w"), *extra],
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert "--split test" in proc.stderr and says in proc.stderr
+    assert not (tmp_path / "w").exists()

@@ -17,7 +17,16 @@ from pathlib import Path
 
 DEMO_EPISODES = 30
 CELLS = ("base_ood", "joint_ood")
-SPLIT = "test"  # the published rows' starts: the demo shows the first of their episodes
+
+
+def demo_split(digest: str) -> str:
+    """The starts a checkpoint is shown on: a published checkpoint's (its weights digest in
+    `checkpoints/manifest.json`) on the test split, the first starts of its published row; any other on the
+    dev split, so that no unpublished network is ever measured on the test starts."""
+    from lerobot_ocr.checkpoints import read_manifest
+
+    published = {e["weights_sha256"] for e in read_manifest()["checkpoints"].values()}
+    return "test" if digest in published else "dev"
 
 
 def resolve_checkpoint(task: str, checkpoint: str | Path | None = None) -> Path:
@@ -38,7 +47,7 @@ def resolve_checkpoint(task: str, checkpoint: str | Path | None = None) -> Path:
     if path.exists():
         return ocr_joint_folder(path)
     repo_id = str(checkpoint)
-    if repo_id.count("/") != 1 or repo_id.startswith((".", "/", "~")):
+    if repo_id.count("/") != 1 or repo_id.startswith((".", "/", "~")) or path.parent.is_dir():
         raise FileNotFoundError(
             f"--checkpoint {checkpoint}: no such folder, and not a hub id. {WHERE_TO_GET}"
         )
@@ -55,23 +64,23 @@ def resolve_checkpoint(task: str, checkpoint: str | Path | None = None) -> Path:
 
 
 def solved_per_episode(results: dict, eval_dirs: dict) -> dict[str, list[bool]]:
-    """Per cell, each episode's success within the budget the comparison uses: the reference's decision
-    budget where the cell reports one (the paper's joint OOD protocol), else its step budget, else the
-    whole episode. `results`: cell -> `summarize` result; `eval_dirs`: cell -> its eval folder."""
+    """Per cell, each episode's success within one budget every cell reports: the reference's decision
+    budget (the paper's joint OOD protocol), else the step budget, else the whole episode. `results`: cell
+    -> `summarize` result; `eval_dirs`: cell -> its eval folder (with `episodes.json`)."""
     from lerobot_ocr.eval_report import budget_success
 
-    solved = {}
+    budgets = {}
     for name, folder in eval_dirs.items():
         episodes = json.loads((Path(folder) / "episodes.json").read_text())
         n = results[name]["n_episodes"]
-        budgets = budget_success(episodes, n)
-        pick = budgets.get("reference_budget") or budgets.get("strict")
-        solved[name] = pick["solved"] if pick else [s > 0 for s in episodes["success_step"][:n]]
-    return solved
+        budgets[name] = budget_success(episodes, n)
+        budgets[name]["episode"] = {"solved": [s > 0 for s in episodes["success_step"][:n]]}
+    key = next(k for k in ("reference_budget", "strict", "episode") if all(k in b for b in budgets.values()))
+    return {name: b[key]["solved"] for name, b in budgets.items()}
 
 
 def recovery_example(
-    task, checkpoint: Path, solved: dict[str, list[bool]], p: dict, work: Path, tries: int = 3
+    task, checkpoint: Path, solved: dict[str, list[bool]], p: dict, work: Path, split: str, tries: int = 3
 ) -> dict | None:
     """Videos of one start where the base fails and `ocr_joint` succeeds (`solved`): the cells ran without
     rendering (rendering a batch of envs costs many times their simulation), so each candidate start is run
@@ -94,7 +103,7 @@ def recovery_example(
 
             def run(policy=policy, dirname=dirname):
                 log = work / "logs" / f"{dirname}.log"
-                return evaluate_cell(task, policy, "ood", one, work / dirname, log, split=SPLIT, offset=i)
+                return evaluate_cell(task, policy, "ood", one, work / dirname, log, split=split, offset=i)
 
             results[name] = stage(dirname, run)
         again = solved_per_episode(results, dirs)
@@ -147,22 +156,24 @@ def demo(
     digest = weights_digest(ckpt)
     work = Path(workdir or f"outputs/demo_{task}").resolve()
     mark = work / CHECKPOINT_MARKER
-    if restart or (mark.exists() and json.loads(mark.read_text())["weights_sha256"] != digest):
-        clear_workdir(work, WORKDIR_MARKERS)
+    before = json.loads(mark.read_text()) if mark.exists() else {}
+    if restart or (before and (before["weights_sha256"], before.get("episodes")) != (digest, episodes)):
+        clear_workdir(work, WORKDIR_MARKERS)  # the demo's own folder, of another checkpoint or size
     p = {**t.profiles["cpu"], "episodes": episodes, "cells": CELLS, "videos": 0, "progress": True}
+    split = demo_split(digest)
     start = time.time()
     print(
         f"{t.title}: the base and ocr_joint of {ckpt} (weights {digest[:12]}) on the first {episodes} OOD "
-        f"starts of the {SPLIT} split, nothing trained",
+        f"starts of the {split} split, nothing trained",
         flush=True,
     )
-    chain = evaluate_checkpoint(t, ckpt, p, work, split=SPLIT)
+    chain = evaluate_checkpoint(t, ckpt, p, work, split=split)
     files = pictures(t, chain, work / "pictures")
     solved = solved_per_episode(chain.results, chain.eval_dirs)
-    example = recovery_example(t, ckpt, solved, p, work)
+    example = recovery_example(t, ckpt, solved, p, work, split)
     names = {"base_ood": "base, OOD starts", "joint_ood": "ocr_joint, OOD starts"}
     first = chain.results["joint_ood"]["first_seed"]
-    print(f"\n{t.title}, {episodes} OOD starts ({SPLIT} split, seeds {first}..{first + episodes - 1}):")
+    print(f"\n{t.title}, {episodes} OOD starts ({split} split, seeds {first}..{first + episodes - 1}):")
     print(format_table({names[n]: chain.results[n] for n in CELLS}))
     line = format_start_split({names[n]: chain.results[n] for n in CELLS})
     if line:

@@ -555,13 +555,24 @@ def evaluate_checkpoint(
         raise FileExistsError(f"{work} holds files that are not a work dir's: pick another work dir.")
     work.mkdir(parents=True, exist_ok=True)
     (work / "logs").mkdir(exist_ok=True)  # the work dir marker (`WORKDIR_MARKERS`), so --restart may clear it
-    mark, digest = work / CHECKPOINT_MARKER, weights_digest(checkpoint)
-    if mark.exists() and json.loads(mark.read_text())["weights_sha256"] != digest:
+    mark = work / CHECKPOINT_MARKER
+    measures = {"checkpoint": str(checkpoint), "weights_sha256": weights_digest(checkpoint)}
+    measures["episodes"] = p["episodes"]
+    if mark.exists():
+        before = json.loads(mark.read_text())
+        if {k: before.get(k) for k in ("weights_sha256", "episodes")} != {
+            k: measures[k] for k in ("weights_sha256", "episodes")
+        }:
+            raise FileExistsError(
+                f"{work} holds the cells of another checkpoint or episode count ({before['checkpoint']}, "
+                f"{before.get('episodes')} episodes): pass --restart to measure this one there, or another "
+                "work dir."
+            )
+    elif any(work.glob("eval_*.json")):
         raise FileExistsError(
-            f"{work} holds the cells of another checkpoint ({json.loads(mark.read_text())['checkpoint']}): "
-            "pass --restart to measure this one there, or another work dir."
+            f"{work} holds a chain's own cells (eval_*.json), not a checkpoint's: pass another work dir."
         )
-    mark.write_text(json.dumps({"checkpoint": str(checkpoint), "weights_sha256": digest}, indent=2))
+    mark.write_text(json.dumps(measures, indent=2))
     stage = Stages(work)
     cells = chain_cells(checkpoint / "base", checkpoint, (n for n in CELLS if n in p.get("cells", CELLS)))
     results = evaluate_cells(stage, task, cells, p, env_args, split)

@@ -70,11 +70,17 @@ def split_of(first: int, n: int = 1) -> SeedRange | None:
     return None
 
 
+LEROBOT_EVAL_EPISODES = 50  # lerobot-eval's default --eval.n_episodes
+
+
 def command_seeds(cmd: list[str]) -> tuple[int, int] | None:
-    """(first seed, episodes) of a `lerobot-eval` / `lerobot-ocr eval` command line: the last `--seed=` and
-    `--eval.n_episodes=` win, as in draccus. None when the command gives no `--seed`."""
-    seed, n = None, 1
-    for a in cmd:
+    """(first seed, episodes) of a `lerobot-eval` / `lerobot-ocr eval` command line: the last `--seed` and
+    `--eval.n_episodes` win, as in draccus (`=` or a space; episodes default to lerobot-eval's 50). None
+    when the command gives no `--seed`."""
+    from lerobot_ocr.eval_resume import joined_args
+
+    seed, n = None, LEROBOT_EVAL_EPISODES
+    for a in joined_args(list(cmd)):  # `--seed 5` -> `--seed=5`, as draccus reads both
         if a.startswith("--seed="):
             seed = int(a.split("=", 1)[1])
         elif a.startswith("--eval.n_episodes="):
@@ -100,7 +106,9 @@ def refuse_test(first: int, n: int, who: str) -> None:
         )
 
 
-def refuse_test_command(cmd: list[str], who: str, seed: int | None = None, episodes: int = 1) -> None:
+def refuse_test_command(
+    cmd: list[str], who: str, seed: int | None = None, episodes: int | None = None
+) -> None:
     """`refuse_test` on the seeds a command line runs (`command_seeds`): its own `--seed` and
     `--eval.n_episodes`, else `seed` and `episodes` (what the caller runs it with); a command with no seed
     from either passes.
@@ -108,7 +116,8 @@ def refuse_test_command(cmd: list[str], who: str, seed: int | None = None, episo
     Raises:
         TestSplitRefused: the command's seeds reach the test split.
     """
-    defaults = [f"--eval.n_episodes={episodes}"] + ([] if seed is None else [f"--seed={seed}"])
+    defaults = [f"--eval.n_episodes={episodes}"] if episodes is not None else []
+    defaults += [] if seed is None else [f"--seed={seed}"]
     seeds = command_seeds([*defaults, *cmd])
     if seeds is not None:
         refuse_test(*seeds, who)

@@ -145,7 +145,7 @@ def demo(
         RuntimeError: a cell failed (its log's tail is in the message; a re-run resumes at that cell).
     """
     from lerobot_ocr.checkpoints import weights_digest
-    from lerobot_ocr.eval_report import format_start_split, format_table
+    from lerobot_ocr.eval_report import format_start_split, format_table, pair_counts
     from lerobot_ocr.files import clear_workdir
     from lerobot_ocr.pipeline import CHECKPOINT_MARKER, TASKS, WORKDIR_MARKERS, evaluate_checkpoint, pictures
 
@@ -178,13 +178,8 @@ def demo(
     line = format_start_split({names[n]: chain.results[n] for n in CELLS})
     if line:
         print(line)
-    pairs = list(zip(solved["base_ood"], solved["joint_ood"]))
-    pair = {
-        "only_joint": pairs.count((False, True)),
-        "only_base": pairs.count((True, False)),
-        "both": pairs.count((True, True)),
-        "neither": pairs.count((False, False)),
-    }
+    c = pair_counts(solved["base_ood"], solved["joint_ood"])
+    pair = {"only_joint": c["only_b"], "only_base": c["only_a"], "both": c["both"], "neither": c["neither"]}
     budget = "reference budget" if "success_rate_reference_budget" in chain.results["joint_ood"] else "budget"
     print(
         f"Same starts, within the {budget}: ocr_joint solves {pair['only_joint']} that the base fails, the "

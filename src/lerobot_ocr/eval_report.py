@@ -497,8 +497,13 @@ def paired_outcomes(episodes_a: dict, episodes_b: dict, budget: int | None = Non
         cap = budget if budget is not None else run.get("step_budget")
         return [s > 0 and (cap is None or s <= cap) for s in steps]
 
-    sa, sb = solved(a, episodes_a), solved(b, episodes_b)
-    pairs = list(zip(sa, sb))
+    return pair_counts(solved(a, episodes_a), solved(b, episodes_b))
+
+
+def pair_counts(solved_a: list[bool], solved_b: list[bool]) -> dict:
+    """Per-episode success flags of two runs on the same starts -> how many episodes both / only a / only
+    b / neither solved."""
+    pairs = list(zip(solved_a, solved_b))
     return {
         "episodes": len(pairs),
         "both": pairs.count((True, True)),
